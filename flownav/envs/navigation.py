@@ -1,0 +1,281 @@
+"""The batched TorchRL navigation environment: B swimmers, one tensor step for all.
+
+State per swimmer: position, heading (theta, psi), target, episode time, flow-time offset,
+start distance and the velocity it currently has. A step turns the heading, moves every
+swimmer with swim + flow velocity (eq. 1-3), then looks the flow up once at the new
+positions: that value is both the flow the next step moves with and the flow the
+observations report, so each step costs exactly one flow look-up.
+
+Episodes end by termination (success within ``success_radius``, leaving the domain,
+entering an obstacle) or by truncation at ``time_limit``; the ``status`` entry says which
+(see :class:`Status`). Partial resets go through ``_reset`` with a ``"_reset"`` mask.
+"""
+
+from __future__ import annotations
+
+import math
+from enum import IntEnum
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Bounded, Categorical, Composite, Unbounded
+from torchrl.envs import EnvBase
+
+from flownav.envs.kinematics import body_frame, heading_vector, move, turn, wrap_angle
+from flownav.envs.observations import State, check_views, compute_views, observation_size
+from flownav.envs.reward import RewardConfig, step_reward
+from flownav.envs.tasks import RegionTask
+from flownav.flows.base import FlowField
+from flownav.flows.transforms import RotatedFlow, rotate_z
+
+# Action bounds of the paper (section 2.3.2): U in [0, U_max], dtheta, dpsi in rad per time unit.
+DTHETA_MAX = math.pi / 4
+DPSI_MAX = math.pi / 2
+
+
+class Status(IntEnum):
+    RUNNING = 0
+    SUCCESS = 1
+    LEFT_DOMAIN = 2
+    HIT_OBSTACLE = 3
+    TIMEOUT = 4
+
+
+class NavigationEnv(EnvBase):
+    """Point-to-point navigation of ``num_envs`` swimmers in a flow.
+
+    Args:
+        flow: any :class:`~flownav.flows.FlowField`.
+        task: a sampler of (start, target) pairs (default: the paper's Region 1 -> Region 2).
+        num_envs: batch size B.
+        views: observation views to emit (``geo``, ``ego``, ``geo_flow``, ``ego_flow``).
+        dt: time step; time_limit: episode length in time units (truncation).
+        u_max: the action's speed bound; swim_speed_scale multiplies the speed the swimmer
+            really gets (0.1 in the ABC test, where the policy still acts in [0, u_max]).
+        misalignment_deg: rotate the whole scene (flow, domain, obstacles, starts, targets,
+            headings) about z through ``rotation_center``: the misaligned-wake test.
+        random_flow_phase: start each episode at a random time of a periodic flow.
+    """
+
+    batch_locked = True
+
+    def __init__(
+        self,
+        flow: FlowField,
+        task=None,
+        num_envs: int = 1024,
+        views=("geo", "ego"),
+        dt: float = 0.2,
+        time_limit: float = 60.0,
+        u_max: float = 1.0,
+        swim_speed_scale: float = 1.0,
+        reward: RewardConfig | None = None,
+        misalignment_deg: float = 0.0,
+        rotation_center: tuple[float, float] = (0.0, 0.0),
+        random_flow_phase: bool = True,
+        seed: int | None = 0,
+        device="cpu",
+    ):
+        if (
+            num_envs < 1
+            or not dt > 0
+            or not time_limit > 0
+            or not u_max > 0
+            or not swim_speed_scale > 0
+        ):
+            raise ValueError(
+                f"need num_envs >= 1, dt > 0, time_limit > 0, u_max > 0, swim_speed_scale > 0; got "
+                f"num_envs={num_envs}, dt={dt}, time_limit={time_limit}, u_max={u_max}, "
+                f"swim_speed_scale={swim_speed_scale}"
+            )
+        super().__init__(device=device, batch_size=torch.Size([num_envs]))
+        self.views = check_views(views)
+        self.angle = math.radians(misalignment_deg)
+        self.rotation_center = tuple(rotation_center)
+        base = flow.to(self.device)
+        self.flow = (
+            RotatedFlow(base, misalignment_deg, rotation_center) if misalignment_deg else base
+        )
+        self.task = task if task is not None else RegionTask()
+        self.dt, self.time_limit = float(dt), float(time_limit)
+        self.u_max, self.swim_speed_scale = float(u_max), float(swim_speed_scale)
+        self.reward_cfg = reward or RewardConfig()
+        self.random_flow_phase = random_flow_phase
+        self.num_envs = num_envs
+        self._make_specs()
+        self._alloc_state()
+        self.rng = torch.Generator(device=self.device)
+        self.set_seed(0 if seed is None else seed)
+
+    # ----------------------------------------------------------------- specs and state
+    def _make_specs(self):
+        B, dev = self.num_envs, self.device
+        obs = {v: Unbounded(shape=(B, observation_size(v)), device=dev) for v in self.views}
+        obs.update(
+            position=Unbounded(shape=(B, 3), device=dev),
+            target=Unbounded(shape=(B, 3), device=dev),
+            velocity=Unbounded(shape=(B, 3), device=dev),
+            heading=Unbounded(shape=(B, 2), device=dev),
+            time=Unbounded(shape=(B, 1), device=dev),
+            status=Categorical(len(Status), shape=(B, 1), dtype=torch.int64, device=dev),
+        )
+        self.observation_spec = Composite(obs, shape=(B,), device=dev)
+        self.action_spec = Bounded(
+            low=torch.tensor([0.0, -DTHETA_MAX, -DPSI_MAX], device=dev).expand(B, 3),
+            high=torch.tensor([self.u_max, DTHETA_MAX, DPSI_MAX], device=dev).expand(B, 3),
+            shape=(B, 3),
+            device=dev,
+        )
+        self.reward_spec = Unbounded(shape=(B, 1), device=dev)
+        self.done_spec = Composite(
+            done=Categorical(2, shape=(B, 1), dtype=torch.bool, device=dev),
+            terminated=Categorical(2, shape=(B, 1), dtype=torch.bool, device=dev),
+            truncated=Categorical(2, shape=(B, 1), dtype=torch.bool, device=dev),
+            shape=(B,),
+            device=dev,
+        )
+
+    def _alloc_state(self):
+        B, dev = self.num_envs, self.device
+        z = lambda *s: torch.zeros(B, *s, device=dev)  # noqa: E731
+        self.pos, self.target, self.vel, self.flow_vel = z(3), z(3), z(3), z(3)
+        self.theta, self.psi, self.time, self.t0 = z(), z(), z(), z()
+        self.start_dist, self.dist, self.speed = z(), z(), z()
+        self.status = torch.zeros(B, dtype=torch.int64, device=dev)
+
+    def _set_seed(self, seed: int | None):
+        self.rng.manual_seed(int(seed) if seed is not None else 0)
+
+    # ----------------------------------------------------------------- sampling
+    def _sample_episodes(self, n: int):
+        """Starts, targets and headings for n new episodes, in the (possibly rotated) scene."""
+        start, target = self.task.sample(n, self.rng, self.device)
+        start, target = start.to(self.device, torch.float32), target.to(self.device, torch.float32)
+        # Rejection: a start must lie in the domain, outside obstacles and outside the success ball.
+        base_flow = self.flow.base if isinstance(self.flow, RotatedFlow) else self.flow
+        for _ in range(100):
+            bad = (
+                ~base_flow.in_domain(start)
+                | base_flow.in_obstacle(start)
+                | ((start - target).norm(dim=-1) <= self.reward_cfg.success_radius)
+            )
+            if not bad.any():
+                break
+            fresh, _ = self.task.sample(n, self.rng, self.device)
+            start = torch.where(bad[:, None], fresh.to(start), start)
+        else:
+            raise ValueError(
+                "the task keeps sampling starts outside the domain or inside an obstacle"
+            )
+        theta = (torch.rand(n, generator=self.rng, device=self.device) * 2 - 1) * math.pi
+        psi = torch.asin(
+            torch.rand(n, generator=self.rng, device=self.device) * 2 - 1
+        )  # uniform on the sphere
+        if self.angle:
+            start = rotate_z(start, self.angle, self.rotation_center)
+            target = rotate_z(target, self.angle, self.rotation_center)
+            theta = theta + self.angle
+        period = self.flow.period
+        if self.random_flow_phase and period:
+            t0 = torch.rand(n, generator=self.rng, device=self.device) * period
+        else:
+            t0 = torch.zeros(n, device=self.device)
+        return start, target, wrap_angle(theta), psi, t0
+
+    # ----------------------------------------------------------------- TorchRL API
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
+        mask = None
+        if tensordict is not None and "_reset" in tensordict.keys():
+            mask = tensordict.get("_reset").reshape(self.num_envs)
+        idx = (
+            torch.arange(self.num_envs, device=self.device)
+            if mask is None
+            else mask.nonzero().squeeze(-1)
+        )
+        if idx.numel():
+            start, target, theta, psi, t0 = self._sample_episodes(idx.numel())
+            flow_vel = self.flow.velocity(start, t0)
+            d = (target - start).norm(dim=-1)
+            zero = torch.zeros_like(d)
+            # Out of place: tensors returned by earlier steps must keep their values.
+            put = lambda old, new: old.index_put((idx,), new)  # noqa: E731
+            self.pos, self.target, self.theta, self.psi = (
+                put(self.pos, start),
+                put(self.target, target),
+                put(self.theta, theta),
+                put(self.psi, psi),
+            )
+            self.t0, self.time, self.speed = (
+                put(self.t0, t0),
+                put(self.time, zero),
+                put(self.speed, zero),
+            )
+            self.status = put(self.status, torch.zeros_like(idx))
+            # At rest relative to the fluid until the first action.
+            self.flow_vel, self.vel = put(self.flow_vel, flow_vel), put(self.vel, flow_vel)
+            self.start_dist, self.dist = put(self.start_dist, d), put(self.dist, d)
+        out = self._observe()
+        false = torch.zeros(self.num_envs, 1, dtype=torch.bool, device=self.device)
+        out.update({"done": false, "terminated": false.clone(), "truncated": false.clone()})
+        return out
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        action = tensordict.get("action")
+        low, high = self.action_spec.space.low, self.action_spec.space.high
+        action = torch.max(torch.min(action, high), low)
+        speed, dtheta, dpsi = action.unbind(-1)
+        self.theta, self.psi = turn(self.theta, self.psi, dtheta, dpsi, self.dt)
+        self.speed = speed * self.swim_speed_scale
+        swim = self.speed[:, None] * heading_vector(self.theta, self.psi)
+        self.pos, _ = move(self.pos, swim, self.flow_vel, self.dt)
+        self.time = self.time + self.dt
+        self.flow_vel = self.flow.velocity(self.pos, self.t0 + self.time)
+        self.vel = swim + self.flow_vel
+
+        prev_dist = self.dist
+        self.dist = (self.target - self.pos).norm(dim=-1)
+        success = self.dist < self.reward_cfg.success_radius
+        left = ~self.flow.in_domain(self.pos)
+        hit = self.flow.in_obstacle(self.pos)
+        # time_limit is reached after round(time_limit / dt) steps; the 1e-6 absorbs rounding.
+        timeout = self.time >= self.time_limit - 1e-6
+        status = torch.full_like(self.status, Status.RUNNING)
+        status = torch.where(timeout, Status.TIMEOUT, status)
+        status = torch.where(hit, Status.HIT_OBSTACLE, status)
+        status = torch.where(left, Status.LEFT_DOMAIN, status)
+        self.status = torch.where(success, Status.SUCCESS, status)
+        terminated = (success | left | hit)[:, None]
+        truncated = timeout[:, None] & ~terminated
+        reward = step_reward(
+            self.reward_cfg, prev_dist, self.dist, self.start_dist, success, self.dt
+        )
+        out = self._observe()
+        out.update(
+            {
+                "reward": reward[:, None],
+                "done": terminated | truncated,
+                "terminated": terminated,
+                "truncated": truncated,
+            }
+        )
+        return out
+
+    def _observe(self) -> TensorDict:
+        state = State(
+            to_target=self.target - self.pos,
+            velocity=self.vel,
+            flow=self.flow_vel,
+            theta=self.theta,
+            psi=self.psi,
+            frame=body_frame(self.theta, self.psi),
+        )
+        data = compute_views(state, self.views)
+        data.update(
+            position=self.pos,
+            target=self.target,
+            velocity=self.vel,
+            heading=torch.stack((self.theta, self.psi), -1),
+            time=self.time[:, None],
+            status=self.status[:, None],
+        )
+        return TensorDict(data, batch_size=self.batch_size, device=self.device)

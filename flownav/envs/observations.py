@@ -1,0 +1,62 @@
+"""Observation views computed from one swimmer state.
+
+* ``geo`` (8, eq. 4): target - position and the total velocity in the inertial frame, theta, psi.
+* ``ego`` (6, eq. 8): the same two vectors in the body frame (no angles, no inertial frame).
+* ``geo_flow`` / ``ego_flow`` (paper SI 1): the local flow velocity instead of the total one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from flownav.envs.kinematics import to_body
+
+
+@dataclass(frozen=True)
+class State:
+    """What every view is computed from (all ``[N, ...]``)."""
+
+    to_target: Tensor  # target - position, inertial frame
+    velocity: Tensor  # total velocity (swim + flow), inertial frame
+    flow: Tensor  # local flow velocity, inertial frame
+    theta: Tensor
+    psi: Tensor
+    frame: Tensor  # body frame [N, 3, 3]
+
+
+def _geo(s: State, vel: Tensor) -> Tensor:
+    return torch.cat((s.to_target, vel, s.theta[:, None], s.psi[:, None]), -1)
+
+
+def _ego(s: State, vel: Tensor) -> Tensor:
+    return torch.cat((to_body(s.frame, s.to_target), to_body(s.frame, vel)), -1)
+
+
+VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
+    "geo": (8, lambda s: _geo(s, s.velocity)),
+    "ego": (6, lambda s: _ego(s, s.velocity)),
+    "geo_flow": (8, lambda s: _geo(s, s.flow)),
+    "ego_flow": (6, lambda s: _ego(s, s.flow)),
+}
+
+
+def check_views(names) -> tuple[str, ...]:
+    names = tuple(names)
+    unknown = [n for n in names if n not in VIEWS]
+    if unknown or not names:
+        raise ValueError(
+            f"unknown observation view(s) {unknown or names}; choose from {sorted(VIEWS)}"
+        )
+    return names
+
+
+def observation_size(name: str) -> int:
+    return VIEWS[check_views([name])[0]][0]
+
+
+def compute_views(state: State, names) -> dict[str, Tensor]:
+    return {name: VIEWS[name][1](state) for name in names}

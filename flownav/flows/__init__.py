@@ -1,0 +1,22 @@
+"""Flow fields: one batched interface ``velocity(pos[N,3], t[N]) -> [N,3]``."""
+
+from flownav.flows.analytic import ABCFlow, UniformFlow
+from flownav.flows.base import Box, Cylinder, FlowField, FunctionFlow
+from flownav.flows.grid import GridFlow, GridFlowError, load_grid_flow, save_grid_flow
+from flownav.flows.transforms import RotatedFlow, ScaledFlow, rotate_z
+
+__all__ = [
+    "ABCFlow",
+    "Box",
+    "Cylinder",
+    "FlowField",
+    "FunctionFlow",
+    "GridFlow",
+    "GridFlowError",
+    "RotatedFlow",
+    "ScaledFlow",
+    "UniformFlow",
+    "load_grid_flow",
+    "rotate_z",
+    "save_grid_flow",
+]
