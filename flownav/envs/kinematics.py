@@ -49,15 +49,11 @@ def to_body(frame: Tensor, vec: Tensor) -> Tensor:
     return torch.einsum("nij,ni->nj", frame, vec)
 
 
-def turn(
-    theta: Tensor, psi: Tensor, dtheta: Tensor, dpsi: Tensor, dt: float
-) -> tuple[Tensor, Tensor]:
+def turn(theta: Tensor, psi: Tensor, dtheta: Tensor, dpsi: Tensor, dt: float) -> tuple[Tensor, Tensor]:
     return wrap_angle(theta + dtheta * dt), (psi + dpsi * dt).clamp(-math.pi / 2, math.pi / 2)
 
 
-def move(
-    pos: Tensor, swim_velocity: Tensor, flow_velocity: Tensor, dt: float
-) -> tuple[Tensor, Tensor]:
+def move(pos: Tensor, swim_velocity: Tensor, flow_velocity: Tensor, dt: float) -> tuple[Tensor, Tensor]:
     """Advance positions by one explicit Euler step; returns (new position, total velocity)."""
     v = swim_velocity + flow_velocity
     return pos + v * dt, v

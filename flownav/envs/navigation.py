@@ -76,13 +76,7 @@ class NavigationEnv(EnvBase):
         seed: int | None = 0,
         device="cpu",
     ):
-        if (
-            num_envs < 1
-            or not dt > 0
-            or not time_limit > 0
-            or not u_max > 0
-            or not swim_speed_scale > 0
-        ):
+        if num_envs < 1 or not dt > 0 or not time_limit > 0 or not u_max > 0 or not swim_speed_scale > 0:
             raise ValueError(
                 f"need num_envs >= 1, dt > 0, time_limit > 0, u_max > 0, swim_speed_scale > 0; got "
                 f"num_envs={num_envs}, dt={dt}, time_limit={time_limit}, u_max={u_max}, "
@@ -93,9 +87,7 @@ class NavigationEnv(EnvBase):
         self.angle = math.radians(misalignment_deg)
         self.rotation_center = tuple(rotation_center)
         base = flow.to(self.device)
-        self.flow = (
-            RotatedFlow(base, misalignment_deg, rotation_center) if misalignment_deg else base
-        )
+        self.flow = RotatedFlow(base, misalignment_deg, rotation_center) if misalignment_deg else base
         self.task = task if task is not None else RegionTask()
         self.dt, self.time_limit = float(dt), float(time_limit)
         self.u_max, self.swim_speed_scale = float(u_max), float(swim_speed_scale)
@@ -164,13 +156,9 @@ class NavigationEnv(EnvBase):
             fresh, _ = self.task.sample(n, self.rng, self.device)
             start = torch.where(bad[:, None], fresh.to(start), start)
         else:
-            raise ValueError(
-                "the task keeps sampling starts outside the domain or inside an obstacle"
-            )
+            raise ValueError("the task keeps sampling starts outside the domain or inside an obstacle")
         theta = (torch.rand(n, generator=self.rng, device=self.device) * 2 - 1) * math.pi
-        psi = torch.asin(
-            torch.rand(n, generator=self.rng, device=self.device) * 2 - 1
-        )  # uniform on the sphere
+        psi = torch.asin(torch.rand(n, generator=self.rng, device=self.device) * 2 - 1)  # uniform on the sphere
         if self.angle:
             start = rotate_z(start, self.angle, self.rotation_center)
             target = rotate_z(target, self.angle, self.rotation_center)
@@ -187,11 +175,7 @@ class NavigationEnv(EnvBase):
         mask = None
         if tensordict is not None and "_reset" in tensordict.keys():
             mask = tensordict.get("_reset").reshape(self.num_envs)
-        idx = (
-            torch.arange(self.num_envs, device=self.device)
-            if mask is None
-            else mask.nonzero().squeeze(-1)
-        )
+        idx = torch.arange(self.num_envs, device=self.device) if mask is None else mask.nonzero().squeeze(-1)
         if idx.numel():
             start, target, theta, psi, t0 = self._sample_episodes(idx.numel())
             flow_vel = self.flow.velocity(start, t0)
@@ -246,9 +230,7 @@ class NavigationEnv(EnvBase):
         self.status = torch.where(success, Status.SUCCESS, status)
         terminated = (success | left | hit)[:, None]
         truncated = timeout[:, None] & ~terminated
-        reward = step_reward(
-            self.reward_cfg, prev_dist, self.dist, self.start_dist, success, self.dt
-        )
+        reward = step_reward(self.reward_cfg, prev_dist, self.dist, self.start_dist, success, self.dt)
         out = self._observe()
         out.update(
             {

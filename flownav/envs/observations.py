@@ -48,9 +48,7 @@ def check_views(names) -> tuple[str, ...]:
     names = tuple(names)
     unknown = [n for n in names if n not in VIEWS]
     if unknown or not names:
-        raise ValueError(
-            f"unknown observation view(s) {unknown or names}; choose from {sorted(VIEWS)}"
-        )
+        raise ValueError(f"unknown observation view(s) {unknown or names}; choose from {sorted(VIEWS)}")
     return names
 
 

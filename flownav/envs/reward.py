@@ -24,9 +24,7 @@ class RewardConfig:
 
     def __post_init__(self):
         if self.success_radius <= 0 or self.alpha < 0 or self.time_penalty < 0:
-            raise ValueError(
-                f"reward needs success_radius > 0, alpha >= 0, time_penalty >= 0: {self}"
-            )
+            raise ValueError(f"reward needs success_radius > 0, alpha >= 0, time_penalty >= 0: {self}")
 
 
 def attenuation(cfg: RewardConfig, dist: Tensor, start_dist: Tensor) -> Tensor:

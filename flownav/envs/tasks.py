@@ -26,9 +26,7 @@ class RegionTask:
     def __init__(self, start: Box = REGION_1, target: Box = REGION_2):
         self.start, self.target = start, target
 
-    def sample(
-        self, n: int, generator: torch.Generator | None = None, device="cpu"
-    ) -> tuple[Tensor, Tensor]:
+    def sample(self, n: int, generator: torch.Generator | None = None, device="cpu") -> tuple[Tensor, Tensor]:
         return self.start.sample(n, generator, device), self.target.sample(n, generator, device)
 
 
@@ -38,9 +36,7 @@ class SymmetricTask:
     def __init__(self, a: Box = REGION_1, b: Box = REGION_2):
         self.a, self.b = a, b
 
-    def sample(
-        self, n: int, generator: torch.Generator | None = None, device="cpu"
-    ) -> tuple[Tensor, Tensor]:
+    def sample(self, n: int, generator: torch.Generator | None = None, device="cpu") -> tuple[Tensor, Tensor]:
         pa, pb = self.a.sample(n, generator, device), self.b.sample(n, generator, device)
         swap = torch.rand(n, 1, generator=generator, device=device) < 0.5
         return torch.where(swap, pb, pa), torch.where(swap, pa, pb)
@@ -54,9 +50,7 @@ class FixedTargetTask:
             raise ValueError("FixedTargetTask needs the start box (usually the whole domain)")
         self.target_point, self.start = tuple(float(x) for x in target), start
 
-    def sample(
-        self, n: int, generator: torch.Generator | None = None, device="cpu"
-    ) -> tuple[Tensor, Tensor]:
+    def sample(self, n: int, generator: torch.Generator | None = None, device="cpu") -> tuple[Tensor, Tensor]:
         start = self.start.sample(n, generator, device)
         return start, torch.tensor(self.target_point, device=device).expand(n, 3).clone()
 
@@ -71,9 +65,7 @@ class ListTask:
             raise ValueError("ListTask needs as many starts as targets, at least one of each")
         self._next = 0
 
-    def sample(
-        self, n: int, generator: torch.Generator | None = None, device="cpu"
-    ) -> tuple[Tensor, Tensor]:
+    def sample(self, n: int, generator: torch.Generator | None = None, device="cpu") -> tuple[Tensor, Tensor]:
         idx = (torch.arange(n) + self._next) % len(self.starts)
         self._next = int((self._next + n) % len(self.starts))
         return self.starts[idx].to(device), self.targets[idx].to(device)

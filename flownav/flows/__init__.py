@@ -1,7 +1,7 @@
 """Flow fields: one batched interface ``velocity(pos[N,3], t[N]) -> [N,3]``."""
 
 from flownav.flows.analytic import ABCFlow, UniformFlow
-from flownav.flows.base import Box, Cylinder, FlowField, FunctionFlow
+from flownav.flows.base import WAKE_BOUNDS, Box, Cylinder, FlowField, FunctionFlow
 from flownav.flows.grid import GridFlow, GridFlowError, load_grid_flow, save_grid_flow
 from flownav.flows.transforms import RotatedFlow, ScaledFlow, rotate_z
 
@@ -16,6 +16,7 @@ __all__ = [
     "RotatedFlow",
     "ScaledFlow",
     "UniformFlow",
+    "WAKE_BOUNDS",
     "load_grid_flow",
     "rotate_z",
     "save_grid_flow",

@@ -19,7 +19,7 @@ import math
 import torch
 from torch import Tensor
 
-from flownav.flows.base import Box, FlowField
+from flownav.flows.base import WAKE_BOUNDS, Box, FlowField
 
 ABC_BOUNDS = Box((-2 * math.pi, -math.pi, -math.pi), (2 * math.pi, math.pi, math.pi))
 
@@ -62,7 +62,7 @@ class ABCFlow(FlowField):
 class UniformFlow(FlowField):
     """Constant velocity everywhere: a free stream, or still water with zeros."""
 
-    def __init__(self, velocity=(1.0, 0.0, 0.0), bounds: Box = Box((-4, -6, 0), (16, 6, 10))):
+    def __init__(self, velocity=(1.0, 0.0, 0.0), bounds: Box = WAKE_BOUNDS):
         self.value = tuple(float(v) for v in velocity)
         self.bounds = bounds
         self.obstacles = ()

@@ -24,13 +24,9 @@ class Box:
 
     def __post_init__(self):
         if len(self.lo) != 3 or len(self.hi) != 3:
-            raise ValueError(
-                f"Box needs 3 lower and 3 upper bounds, got lo={self.lo}, hi={self.hi}"
-            )
+            raise ValueError(f"Box needs 3 lower and 3 upper bounds, got lo={self.lo}, hi={self.hi}")
         if any(h <= l for l, h in zip(self.lo, self.hi, strict=True)):
-            raise ValueError(
-                f"Box upper bounds must exceed lower bounds, got lo={self.lo}, hi={self.hi}"
-            )
+            raise ValueError(f"Box upper bounds must exceed lower bounds, got lo={self.lo}, hi={self.hi}")
 
     def contains(self, pos: Tensor) -> Tensor:
         lo = pos.new_tensor(self.lo)
@@ -68,6 +64,10 @@ def obstacle_from_dict(d: dict) -> Cylinder:
     if d.get("type") != "cylinder":
         raise ValueError(f"unknown obstacle type {d.get('type')!r}; flownav knows 'cylinder'")
     return Cylinder(center=tuple(d["center"]), radius=float(d["radius"]))
+
+
+# The navigation domain of the cylinder wake (cylinder of diameter 1 at x = y = 0, axis z).
+WAKE_BOUNDS = Box((-4.0, -6.0, 0.0), (16.0, 6.0, 10.0))
 
 
 class FlowField:

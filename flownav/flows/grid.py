@@ -59,9 +59,7 @@ class GridFlow(FlowField):
         dtype: torch.dtype = torch.float32,
         device="cpu",
     ):
-        velocity = torch.as_tensor(
-            np.asarray(velocity) if isinstance(velocity, np.ndarray) else velocity
-        )
+        velocity = torch.as_tensor(np.asarray(velocity) if isinstance(velocity, np.ndarray) else velocity)
         check_velocity_array(velocity.shape, torch.isfinite(velocity).all().item())
         if len(origin) != 3 or len(spacing) != 3 or len(periodic) != 3:
             raise GridFlowError("origin, spacing and periodic need 3 entries each (x, y, z)")
@@ -74,9 +72,7 @@ class GridFlow(FlowField):
         self.periodic = tuple(bool(p) for p in periodic)
         self.period = self.shape[0] * self.dt
         n = self.shape[1:]
-        grid_hi = tuple(
-            o + (k - 1) * s for o, k, s in zip(self.origin, n, self.spacing, strict=True)
-        )
+        grid_hi = tuple(o + (k - 1) * s for o, k, s in zip(self.origin, n, self.spacing, strict=True))
         self.bounds = bounds if bounds is not None else Box(self.origin, grid_hi)
         self.obstacles = tuple(obstacles)
         self.meta = dict(meta or {})
@@ -141,9 +137,7 @@ def check_velocity_array(shape: Sequence[int], all_finite: bool) -> None:
             "(frames, grid points along x, y, z, and the components u, v, w)"
         )
     if shape[0] < 1 or min(shape[1:4]) < 2:
-        raise GridFlowError(
-            f"velocity array {tuple(shape)} needs >= 1 frame and >= 2 points per axis"
-        )
+        raise GridFlowError(f"velocity array {tuple(shape)} needs >= 1 frame and >= 2 points per axis")
     if not all_finite:
         raise GridFlowError(
             "velocity array holds NaN or infinite values; regenerate the dataset "
@@ -224,14 +218,10 @@ def save_grid_flow(
 _REQUIRED = ("format", "shape", "origin", "spacing", "dt", "periodic", "bounds", "sha256")
 
 
-def load_grid_flow(
-    path: str | os.PathLike, device="cpu", dtype=torch.float32, verify: bool = True
-) -> GridFlow:
+def load_grid_flow(path: str | os.PathLike, device="cpu", dtype=torch.float32, verify: bool = True) -> GridFlow:
     """Load and validate a ``flownav-grid-v1`` dataset directory."""
     path = Path(path)
-    regen = (
-        "regenerate it with `python -m flownav.cfd generate` or point flow.path at a valid dataset"
-    )
+    regen = "regenerate it with `python -m flownav.cfd generate` or point flow.path at a valid dataset"
     if not path.is_dir():
         raise GridFlowError(f"no grid-flow dataset at {path}: {regen}")
     meta_path, vel_path = path / META_FILE, path / VELOCITY_FILE
@@ -259,9 +249,7 @@ def load_grid_flow(
     except (ValueError, OSError) as e:
         raise GridFlowError(f"cannot read {vel_path} ({e}): {regen}") from e
     if list(arr.shape) != list(meta["shape"]):
-        raise GridFlowError(
-            f"{vel_path} has shape {list(arr.shape)} but meta.json says {meta['shape']}: {regen}"
-        )
+        raise GridFlowError(f"{vel_path} has shape {list(arr.shape)} but meta.json says {meta['shape']}: {regen}")
     tensor = torch.from_numpy(np.ascontiguousarray(arr))
     check_velocity_array(tensor.shape, bool(torch.isfinite(tensor).all()))
     b = meta["bounds"]
