@@ -74,21 +74,25 @@ def kbc(lat: Lattice, f: list[Tensor], beta: Tensor | float) -> list[Tensor]:
             2 * ci[1] * ci[2],
         ]
         cpc = _dot(coeffs, pd)
-        dsi = (4.5 * wi) * cpc
+        dsi = None if cpc is None else (4.5 * wi) * cpc  # the rest population has no shear part
         ds.append(dsi)
-        dh.append(dfi - dsi)
+        dh.append(dfi if dsi is None else dfi - dsi)
     sh = None
     hh = None
     for dsi, dhi, fe in zip(ds, dh, feq, strict=True):
         inv = 1.0 / fe
-        a = dsi * dhi * inv
         b = dhi * dhi * inv
-        sh = a if sh is None else sh + a
         hh = b if hh is None else hh + b
+        if dsi is not None:
+            a = dsi * dhi * inv
+            sh = a if sh is None else sh + a
     inv_beta = 1.0 / beta
     gamma = inv_beta - (2.0 - inv_beta) * sh / (hh + 1e-30)
     # Where dh vanishes gamma is irrelevant; bound it so round-off cannot inject energy.
     gamma = gamma.clamp(0.0, 2.0 * inv_beta) if isinstance(gamma, Tensor) else gamma
     two_beta = 2.0 * beta
     beta_gamma = beta * gamma
-    return [fi - two_beta * dsi - beta_gamma * dhi for fi, dsi, dhi in zip(f, ds, dh, strict=True)]
+    return [
+        fi - beta_gamma * dhi if dsi is None else fi - two_beta * dsi - beta_gamma * dhi
+        for fi, dsi, dhi in zip(f, ds, dh, strict=True)
+    ]

@@ -1,0 +1,97 @@
+"""Networks shared by every policy: an MLP, a running observation normaliser, and the
+deterministic policy that evaluation, DAgger labelling and checkpoints use.
+
+A teacher (PPO) and a student (DAgger) differ only in how their MLP is trained: the PPO
+actor's MLP outputs ``2 * action_dim`` numbers (location and scale of a TanhNormal), the
+student's outputs ``action_dim``. In both, the deterministic action is the first
+``action_dim`` outputs squashed by tanh into the action box.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+from torch import Tensor, nn
+
+ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU, "silu": nn.SiLU}
+
+
+def mlp(in_dim: int, out_dim: int, hidden: Sequence[int] = (256, 256), activation: str = "tanh") -> nn.Sequential:
+    if activation not in ACTIVATIONS:
+        raise ValueError(f"unknown activation {activation!r}; choose from {sorted(ACTIVATIONS)}")
+    layers, last = [], in_dim
+    for h in hidden:
+        layers += [nn.Linear(last, int(h)), ACTIVATIONS[activation]()]
+        last = int(h)
+    layers.append(nn.Linear(last, out_dim))
+    return nn.Sequential(*layers)
+
+
+class ObsNormalizer(nn.Module):
+    """Running mean and variance (parallel Welford); frozen unless :meth:`update` is called."""
+
+    def __init__(self, dim: int, clip: float = 10.0, eps: float = 1e-6):
+        super().__init__()
+        self.clip, self.eps = clip, eps
+        self.register_buffer("mean", torch.zeros(dim))
+        self.register_buffer("var", torch.ones(dim))
+        self.register_buffer("count", torch.zeros(()))
+
+    @torch.no_grad()
+    def update(self, x: Tensor) -> None:
+        x = x.reshape(-1, self.mean.shape[0]).to(self.mean)
+        n = x.shape[0]
+        if n == 0:
+            return
+        batch_mean, batch_var = x.mean(0), x.var(0, unbiased=False)
+        total = self.count + n
+        delta = batch_mean - self.mean
+        self.mean += delta * n / total
+        self.var = (self.var * self.count + batch_var * n + delta**2 * self.count * n / total) / total
+        self.count = total
+
+    def forward(self, x: Tensor) -> Tensor:
+        return ((x - self.mean) / (self.var + self.eps).sqrt()).clamp(-self.clip, self.clip)
+
+
+class SquashedAction(nn.Module):
+    """Map unbounded numbers to the action box with tanh: low + (high - low) (tanh(x) + 1) / 2."""
+
+    def __init__(self, low: Sequence[float], high: Sequence[float]):
+        super().__init__()
+        self.register_buffer("low", torch.as_tensor(low, dtype=torch.float32))
+        self.register_buffer("high", torch.as_tensor(high, dtype=torch.float32))
+
+    def forward(self, x: Tensor) -> Tensor:
+        return self.low + (self.high - self.low) * (torch.tanh(x) + 1) / 2
+
+
+class DeterministicPolicy(nn.Module):
+    """observation -> normalise -> MLP -> first ``action_dim`` outputs -> tanh into the action box."""
+
+    def __init__(
+        self,
+        obs_dim: int,
+        action_low: Sequence[float],
+        action_high: Sequence[float],
+        hidden: Sequence[int] = (256, 256),
+        activation: str = "tanh",
+        n_outputs: int | None = None,
+    ):
+        super().__init__()
+        self.action_dim = len(action_low)
+        self.config = {
+            "obs_dim": int(obs_dim),
+            "action_low": [float(v) for v in action_low],
+            "action_high": [float(v) for v in action_high],
+            "hidden": [int(h) for h in hidden],
+            "activation": activation,
+            "n_outputs": int(n_outputs or self.action_dim),
+        }
+        self.normalizer = ObsNormalizer(obs_dim)
+        self.net = mlp(obs_dim, self.config["n_outputs"], hidden, activation)
+        self.squash = SquashedAction(action_low, action_high)
+
+    def forward(self, obs: Tensor) -> Tensor:
+        return self.squash(self.net(self.normalizer(obs))[..., : self.action_dim])

@@ -1,0 +1,98 @@
+"""Policy checkpoints: one format for teachers, baselines and students.
+
+A checkpoint is a ``torch.save`` dict with ``format == "flownav-policy-v1"``:
+
+* ``policy``: the :class:`~flownav.agents.DeterministicPolicy` constructor config and
+  ``state_dict`` (normaliser statistics included);
+* ``obs``: the observation view it reads (``geo``, ``ego``, ``geo_flow``, ``ego_flow``);
+* ``role``: ``teacher``, ``baseline`` or ``student``; ``meta``: free (config, step, metrics);
+* ``train_state``: anything a resumed run needs (optimiser, step counters, RNG), optional.
+
+Writes are atomic (temporary file, then rename), so a kill never leaves half a checkpoint.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import torch
+from tensordict.nn import TensorDictModule
+
+from flownav.agents.networks import DeterministicPolicy
+from flownav.envs.observations import observation_size
+
+FORMAT = "flownav-policy-v1"
+
+
+class CheckpointError(ValueError):
+    """A checkpoint is missing, corrupt or does not fit the requested set-up."""
+
+
+def atomic_torch_save(obj, path: str | os.PathLike) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
+    os.close(fd)
+    try:
+        torch.save(obj, tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def save_policy_checkpoint(
+    path, policy: DeterministicPolicy, obs: str, role: str, meta: dict | None = None, train_state: dict | None = None
+) -> Path:
+    if observation_size(obs) != policy.config["obs_dim"]:
+        raise CheckpointError(
+            f"policy reads {policy.config['obs_dim']} numbers but view {obs!r} has {observation_size(obs)}"
+        )
+    payload = {
+        "format": FORMAT,
+        "obs": obs,
+        "role": role,
+        "policy": {"config": policy.config, "state_dict": policy.state_dict()},
+        "meta": meta or {},
+        "train_state": train_state,
+    }
+    return atomic_torch_save(payload, path)
+
+
+def load_checkpoint(path) -> dict:
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(
+            f"no checkpoint at {path}: train one (python train.py +experiment=teacher) or fix the path"
+        )
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as e:  # noqa: BLE001 - any unpickling failure means a corrupt file
+        raise CheckpointError(f"cannot read checkpoint {path} ({e}); it is corrupt or not a flownav checkpoint") from e
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
+        raise CheckpointError(f"{path} is not a {FORMAT} checkpoint")
+    return payload
+
+
+def load_policy(path, expect_obs: str | None = None, device="cpu") -> tuple[DeterministicPolicy, dict]:
+    """Rebuild the deterministic policy of a checkpoint; refuse one that reads another view."""
+    payload = load_checkpoint(path)
+    if expect_obs is not None and payload["obs"] != expect_obs:
+        raise CheckpointError(
+            f"checkpoint {path} is a {payload['role']} reading {payload['obs']!r} observations "
+            f"({observation_size(payload['obs'])} numbers), but this run needs {expect_obs!r} "
+            f"({observation_size(expect_obs)} numbers): pass a checkpoint trained on {expect_obs!r}"
+        )
+    policy = DeterministicPolicy(**payload["policy"]["config"])
+    policy.load_state_dict(payload["policy"]["state_dict"])
+    policy.eval().requires_grad_(False)
+    return policy.to(device), payload
+
+
+def policy_module(policy: DeterministicPolicy, obs: str, out_key: str = "action") -> TensorDictModule:
+    """Wrap a deterministic policy to read ``obs`` and write ``out_key`` in a tensordict."""
+    return TensorDictModule(policy, in_keys=[obs], out_keys=[out_key])
