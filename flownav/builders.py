@@ -60,7 +60,15 @@ def build_flow(cfg: Mapping, device="cpu") -> FlowField:
             kw["bounds"] = _box(cfg["bounds"], "flow.bounds")
         return UniformFlow(**kw)
 
-    flow = _pick(cfg, "flow", {"grid": grid, "abc": abc, "uniform": uniform})()
+    def vortex_street():
+        from flownav.flows.vortex_street import VortexStreetFlow
+
+        names = ("period", "advection", "circulation", "core_radius", "half_spacing", "spreading", "deficit")
+        kw = {k: float(cfg[k]) for k in names if cfg.get(k) is not None}
+        return VortexStreetFlow(**kw)
+
+    kinds = {"grid": grid, "abc": abc, "uniform": uniform, "vortex_street": vortex_street}
+    flow = _pick(cfg, "flow", kinds)()
     scale = float(cfg.get("speed_scale", 1.0))
     if scale <= 0:
         raise ConfigError(f"flow.speed_scale must be > 0, got {scale}")

@@ -14,6 +14,7 @@ velocities as Python constants, so torch.compile fuses the whole collision into 
 
 from __future__ import annotations
 
+import torch
 from torch import Tensor
 
 from flownav.cfd.lattice import Lattice
@@ -51,11 +52,7 @@ def kbc(lat: Lattice, f: list[Tensor], beta: Tensor | float) -> list[Tensor]:
     feq, df = [], []
     for ci, wi, fi in zip(lat.c, lat.w, f, strict=True):
         cu = _dot(ci, (ux, uy, uz))
-        feq_i = (
-            wi * rho * (1 - usq15)
-            if cu is None
-            else wi * rho * (1 + 3 * cu + 4.5 * cu * cu - usq15)
-        )
+        feq_i = wi * rho * (1 - usq15) if cu is None else wi * rho * (1 + 3 * cu + 4.5 * cu * cu - usq15)
         feq.append(feq_i)
         df.append(fi - feq_i)
     # Non-equilibrium second moment and its traceless part.
@@ -89,7 +86,7 @@ def kbc(lat: Lattice, f: list[Tensor], beta: Tensor | float) -> list[Tensor]:
     inv_beta = 1.0 / beta
     gamma = inv_beta - (2.0 - inv_beta) * sh / (hh + 1e-30)
     # Where dh vanishes gamma is irrelevant; bound it so round-off cannot inject energy.
-    gamma = gamma.clamp(0.0, 2.0 * inv_beta) if isinstance(gamma, Tensor) else gamma
+    gamma = torch.minimum(gamma.clamp(min=0.0), 2.0 * torch.as_tensor(inv_beta))
     two_beta = 2.0 * beta
     beta_gamma = beta * gamma
     return [

@@ -39,9 +39,7 @@ class Lattice:
 
 def _make(name: str) -> Lattice:
     # Weight by the number of non-zero components: rest, faces, edges, corners.
-    weights = {"D3Q19": (1 / 3, 1 / 18, 1 / 36, 0.0), "D3Q27": (8 / 27, 2 / 27, 1 / 54, 1 / 216)}[
-        name
-    ]
+    weights = {"D3Q19": (1 / 3, 1 / 18, 1 / 36, 0.0), "D3Q27": (8 / 27, 2 / 27, 1 / 54, 1 / 216)}[name]
     cs, ws = [], []
     for ci in itertools.product((0, 1, -1), repeat=3):
         wi = weights[sum(a != 0 for a in ci)]

@@ -46,7 +46,7 @@ def body_frame(theta: Tensor, psi: Tensor) -> Tensor:
 
 def to_body(frame: Tensor, vec: Tensor) -> Tensor:
     """Components of inertial vectors ``[N, 3]`` in the body frame (R^T v)."""
-    return torch.einsum("nij,ni->nj", frame, vec)
+    return (frame * vec[:, :, None]).sum(1)  # elementwise: faster than einsum/bmm for 3x3
 
 
 def turn(theta: Tensor, psi: Tensor, dtheta: Tensor, dpsi: Tensor, dt: float) -> tuple[Tensor, Tensor]:

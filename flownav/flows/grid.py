@@ -76,58 +76,73 @@ class GridFlow(FlowField):
         self.bounds = bounds if bounds is not None else Box(self.origin, grid_hi)
         self.obstacles = tuple(obstacles)
         self.meta = dict(meta or {})
-        self._flat = velocity.to(device=device, dtype=dtype).reshape(-1, 3).contiguous()
         if max_speed is None:
-            max_speed = float(self._flat.float().norm(dim=-1).max())
+            max_speed = float(velocity.float().norm(dim=-1).max())
         self.max_speed = float(max_speed)
+        self._store(velocity.to(device=device, dtype=dtype))
+
+    def _store(self, velocity: Tensor) -> None:
+        """Lay the field out so that a swimmer's 16 interpolation corners are 4 contiguous rows.
+
+        Frame T (= frame 0) closes the time loop and a ghost layer closes each periodic axis, so
+        the upper corner index is always lower + 1. Each row of ``_table`` holds the 2 (z) x 2 (t)
+        x 3 values of one (x, y, z, t) cell; a look-up gathers the rows of the 4 (x, y) corners.
+        Random gathers from a large grid are bound by memory latency, and 4 gathers of 12 numbers
+        beat 16 of 3 (about 4x here) at the price of 4x the memory.
+        """
+        self._source = velocity
+        v = torch.cat((velocity, velocity[:1]), 0)
+        for axis, periodic in enumerate(self.periodic):
+            if periodic:
+                v = torch.cat((v, v.narrow(axis + 1, 0, 1)), axis + 1)
+        v = v.permute(1, 2, 3, 0, 4)  # [px, py, pz, T + 1, 3]
+        pairs = torch.stack((v[:, :, :-1], v[:, :, 1:]), 3)  # [px, py, pz - 1, 2(z), T + 1, 3]
+        pairs = torch.stack((pairs[:, :, :, :, :-1], pairs[:, :, :, :, 1:]), 5)  # [.., 2(z), T, 2(t), 3]
+        table = pairs.permute(0, 1, 2, 4, 3, 5, 6)  # [px, py, pz - 1, T, 2(z), 2(t), 3]
+        px, py, nzp, T = table.shape[:4]
+        self._row_strides = (py * nzp * T, nzp * T, T, 1)  # x, y, z, t
+        self._table = table.reshape(-1, 12).contiguous()
 
     @property
     def device(self) -> torch.device:
-        return self._flat.device
+        return self._table.device
 
     def to(self, device) -> GridFlow:
-        self._flat = self._flat.to(device)
+        self._store(self._source.to(device))
         return self
 
-    def _axis(self, coord: Tensor, axis: int) -> tuple[Tensor, Tensor, Tensor]:
-        """Lower index, upper index and weight of the upper one along one spatial axis."""
+    def _axis(self, coord: Tensor, axis: int) -> tuple[Tensor, Tensor]:
+        """Lower corner index and the weight of the upper one along one spatial axis."""
         n = self.shape[1 + axis]
         g = (coord - self.origin[axis]) / self.spacing[axis]
         if self.periodic[axis]:
             g = torch.remainder(g, n)
-            i0 = g.floor().clamp_(0, n - 1)
-            w = g - i0
-            i0 = i0.long()
-            return i0, torch.remainder(i0 + 1, n), w
-        g = g.clamp(0, n - 1)
-        i0 = g.floor().clamp_(max=n - 2)
-        w = g - i0
-        i0 = i0.long()
-        return i0, i0 + 1, w
+            i0 = g.floor().clamp_(0, n - 1)  # remainder can round up to n
+        else:
+            g = g.clamp(0, n - 1)
+            i0 = g.floor().clamp_(max=n - 2)
+        return i0, g - i0
 
     def velocity(self, pos: Tensor, t: Tensor) -> Tensor:
-        T, nx, ny, nz = self.shape
-        f = torch.remainder(t.to(pos.dtype) / self.dt, T)
-        f0 = f.floor().clamp_(0, T - 1)
+        f = torch.remainder(t.to(pos.dtype) / self.dt, self.shape[0])
+        f0 = f.floor().clamp_(0, self.shape[0] - 1)
         wt = f - f0
-        f0 = f0.long()
-        f1 = torch.remainder(f0 + 1, T)
-        x0, x1, wx = self._axis(pos[:, 0], 0)
-        y0, y1, wy = self._axis(pos[:, 1], 1)
-        z0, z1, wz = self._axis(pos[:, 2], 2)
-        # 16 corners (2 frames x 8 spatial): flat index and weight, gathered in one call.
-        fi = torch.stack((f0, f1), -1)[:, :, None, None, None] * nx
-        xi = torch.stack((x0, x1), -1)[:, None, :, None, None]
-        yi = torch.stack((y0, y1), -1)[:, None, None, :, None]
-        zi = torch.stack((z0, z1), -1)[:, None, None, None, :]
-        idx = (((fi + xi) * ny + yi) * nz + zi).reshape(-1, 16)
-        wf = torch.stack((1 - wt, wt), -1)[:, :, None, None, None]
-        wxs = torch.stack((1 - wx, wx), -1)[:, None, :, None, None]
-        wys = torch.stack((1 - wy, wy), -1)[:, None, None, :, None]
-        wzs = torch.stack((1 - wz, wz), -1)[:, None, None, None, :]
-        w = (wf * wxs * wys * wzs).reshape(-1, 16, 1)
-        corners = self._flat[idx.reshape(-1)].reshape(-1, 16, 3).to(pos.dtype)
-        return (corners * w).sum(1)
+        x0, wx = self._axis(pos[:, 0], 0)
+        y0, wy = self._axis(pos[:, 1], 1)
+        z0, wz = self._axis(pos[:, 2], 2)
+        sx, sy, sz, st = self._row_strides
+        row = (x0 * sx + y0 * sy + z0 * sz + f0 * st).long()
+        rows = torch.stack((row, row + sx, row + sy, row + sx + sy), 1)  # (x0,y0), (x1,y0), (x0,y1), (x1,y1)
+        c = self._table.index_select(0, rows.reshape(-1)).view(-1, 2, 2, 2, 2, 3).to(pos.dtype)  # [N, y, x, z, t, 3]
+        # Linear in t, then z, x, y; each pass halves the corners (contiguous halves: fastest here).
+        n = c.shape[0]
+        c = c.view(n, 8, 2, 3)
+        c = c[:, :, 0] + wt.view(n, 1, 1) * (c[:, :, 1] - c[:, :, 0])
+        c = c.view(n, 4, 2, 3)
+        c = c[:, :, 0] + wz.view(n, 1, 1) * (c[:, :, 1] - c[:, :, 0])
+        c = c.view(n, 2, 2, 3)
+        c = c[:, :, 0] + wx.view(n, 1, 1) * (c[:, :, 1] - c[:, :, 0])
+        return c[:, 0] + wy.view(n, 1) * (c[:, 1] - c[:, 0])
 
 
 def check_velocity_array(shape: Sequence[int], all_finite: bool) -> None:

@@ -1,0 +1,432 @@
+"""PPO for the geo teacher and the ego baseline, built from TorchRL's pieces.
+
+    collector (Collector over the batched NavigationEnv, B swimmers x T steps per batch)
+      -> GAE (critic = ValueOperator)
+      -> E epochs over a LazyTensorStorage replay buffer sampled without replacement
+      -> ClipPPOLoss (actor = TanhNormal ProbabilisticActor), Adam, grad-norm clipping
+      -> observation-normaliser update, logging, checkpoints.
+
+The actor is a :class:`~flownav.agents.DeterministicPolicy` whose MLP outputs 6 numbers: the first
+3 are the TanhNormal location, the last 3 its scale parameter. Its deterministic action
+(tanh of the location, mapped into the action box) is exactly ``DeterministicPolicy.forward``,
+so a checkpoint of this actor is a plain deterministic policy for evaluation and DAgger.
+
+Observation normalisation: the actor's ``ObsNormalizer`` (and the critic's own) are updated from
+each collected batch *after* the PPO epochs on it, so the batch is scored with the statistics
+that collected it (the first-epoch ratio is exactly 1) and the next batch uses the new ones.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import torch
+from omegaconf import OmegaConf
+from tensordict.nn import NormalParamExtractor, TensorDictModule
+from torch import nn
+from torchrl.collectors import Collector
+from torchrl.data import LazyTensorStorage, ReplayBuffer, SamplerWithoutReplacement
+from torchrl.modules import ProbabilisticActor, TanhNormal, ValueOperator
+from torchrl.objectives import ClipPPOLoss
+from torchrl.objectives.value import GAE
+
+from flownav.agents.networks import ACTIVATIONS, DeterministicPolicy, ObsNormalizer, mlp
+from flownav.builders import ConfigError, build_env, build_flow, build_task
+from flownav.checkpoint import load_checkpoint, save_policy_checkpoint
+from flownav.envs.navigation import NavigationEnv, Status
+from flownav.envs.observations import VIEWS, observation_size
+from flownav.runlog import RunLogger
+
+LOSS_CRITIC_TYPES = ("l1", "l2", "smooth_l1")
+
+
+# ----------------------------------------------------------------------------- networks
+class ActorNet(nn.Module):
+    """obs -> DeterministicPolicy's normaliser and MLP (6 outputs) -> (loc, scale) of a TanhNormal."""
+
+    def __init__(self, policy: DeterministicPolicy, init_scale: float = 1.0, scale_lb: float = 1e-3):
+        super().__init__()
+        self.policy = policy
+        self.extract = NormalParamExtractor(scale_mapping=f"biased_softplus_{init_scale}", scale_lb=scale_lb)
+
+    def forward(self, obs):
+        return self.extract(self.policy.net(self.policy.normalizer(obs)))
+
+
+class CriticNet(nn.Module):
+    """obs -> own running normaliser -> MLP -> state value."""
+
+    def __init__(self, obs_dim: int, hidden, activation: str):
+        super().__init__()
+        self.normalizer = ObsNormalizer(obs_dim)
+        self.net = mlp(obs_dim, 1, hidden, activation)
+
+    def forward(self, obs):
+        return self.net(self.normalizer(obs))
+
+
+def _init_output_layer(seq: nn.Sequential, gain: float):
+    last = [m for m in seq if isinstance(m, nn.Linear)][-1]
+    nn.init.orthogonal_(last.weight, gain)
+    nn.init.zeros_(last.bias)
+
+
+def make_actor_critic(obs_key: str, critic_key: str, low, high, actor_cfg, critic_cfg):
+    """The TanhNormal ProbabilisticActor (around a DeterministicPolicy) and the ValueOperator."""
+    policy = DeterministicPolicy(
+        observation_size(obs_key),
+        low.tolist(),
+        high.tolist(),
+        hidden=list(actor_cfg["hidden"]),
+        activation=str(actor_cfg["activation"]),
+        n_outputs=2 * len(low),
+    )
+    _init_output_layer(policy.net, float(actor_cfg.get("output_gain", 0.01)))
+    net = ActorNet(policy, float(actor_cfg["init_scale"]), float(actor_cfg["scale_lb"]))
+    actor = ProbabilisticActor(
+        TensorDictModule(net, in_keys=[obs_key], out_keys=["loc", "scale"]),
+        in_keys=["loc", "scale"],
+        distribution_class=TanhNormal,
+        distribution_kwargs={"low": low, "high": high, "tanh_loc": False},
+        return_log_prob=True,
+    )
+    critic_net = CriticNet(observation_size(critic_key), list(critic_cfg["hidden"]), str(critic_cfg["activation"]))
+    _init_output_layer(critic_net.net, 1.0)
+    critic = ValueOperator(critic_net, in_keys=[critic_key])
+    return policy, actor, critic_net, critic
+
+
+# ----------------------------------------------------------------------------- config checks
+def check_config(cfg) -> None:
+    """Fail at start, naming the key, on values Hydra's types cannot catch."""
+    a = cfg.algo
+    obs = cfg.obs
+    for key in ("view", "critic_view"):
+        v = obs.get(key)
+        if v is not None and v not in VIEWS:
+            raise ConfigError(f"obs.{key} is {v!r}; choose one of {sorted(VIEWS)}")
+    positive = ("total_frames", "rollout_steps", "epochs", "minibatch_size", "lr", "max_grad_norm")
+    for key in positive:
+        if not a[key] > 0:
+            raise ConfigError(f"algo.{key} must be > 0, got {a[key]}")
+    for key in ("gamma", "lmbda"):
+        if not 0.0 < a[key] <= 1.0:
+            raise ConfigError(f"algo.{key} must be in (0, 1], got {a[key]}")
+    if not 0.0 < a.clip_epsilon < 1.0:
+        raise ConfigError(f"algo.clip_epsilon must be in (0, 1), got {a.clip_epsilon}")
+    if a.entropy_coeff < 0 or a.critic_coeff < 0:
+        raise ConfigError("algo.entropy_coeff and algo.critic_coeff must be >= 0")
+    if a.loss_critic_type not in LOSS_CRITIC_TYPES:
+        raise ConfigError(f"algo.loss_critic_type is {a.loss_critic_type!r}; choose one of {list(LOSS_CRITIC_TYPES)}")
+    for net in ("actor", "critic"):
+        if a[net].activation not in ACTIVATIONS:
+            raise ConfigError(f"algo.{net}.activation is {a[net].activation!r}; choose one of {sorted(ACTIVATIONS)}")
+        if not a[net].hidden or any(int(h) <= 0 for h in a[net].hidden):
+            raise ConfigError(f"algo.{net}.hidden must be a non-empty list of positive sizes, got {a[net].hidden}")
+    if not a.actor.init_scale > 0:
+        raise ConfigError(f"algo.actor.init_scale must be > 0, got {a.actor.init_scale}")
+    frames = int(cfg.env.num_envs) * int(a.rollout_steps)
+    if a.minibatch_size > frames:
+        raise ConfigError(
+            f"algo.minibatch_size ({a.minibatch_size}) exceeds a batch of env.num_envs x algo.rollout_steps = {frames}"
+        )
+    if cfg.checkpoint_every is not None and cfg.checkpoint_every < 1:
+        raise ConfigError(f"checkpoint_every must be >= 1 iteration (or null), got {cfg.checkpoint_every}")
+
+
+# ----------------------------------------------------------------------------- evaluation
+@torch.no_grad()
+def evaluate_policy(policy, make_env, obs_key: str, episodes: int, chunk: int = 10_000) -> dict:
+    """Deterministic rollouts: exactly ``episodes`` episodes, one per env slot, no auto-reset.
+
+    ``make_env(num_envs, seed_offset)`` builds a fresh env; each slot runs until its first
+    ``done`` and its status then is the episode's outcome.
+    """
+    statuses, times = [], []
+    done_so_far = 0
+    while done_so_far < episodes:
+        n = min(chunk, episodes - done_so_far)
+        env: NavigationEnv = make_env(n, done_so_far)
+        td = env.reset()
+        status = torch.zeros(n, dtype=torch.int64)
+        t_end = torch.full((n,), math.nan)
+        finished = torch.zeros(n, dtype=torch.bool)
+        while not finished.all():
+            td["action"] = policy(td[obs_key])
+            td = env.step(td)["next"]
+            new = td["done"].reshape(-1) & ~finished
+            status = torch.where(new, td["status"].reshape(-1), status)
+            t_end = torch.where(new, td["time"].reshape(-1), t_end)
+            finished |= new
+        statuses.append(status)
+        times.append(t_end)
+        done_so_far += n
+    status, t_end = torch.cat(statuses), torch.cat(times)
+    success = status == Status.SUCCESS
+    out = {"episodes": int(status.numel()), "success_rate": float(success.float().mean())}
+    out["mean_success_time"] = float(t_end[success].mean()) if success.any() else None
+    for s in Status:
+        if s not in (Status.RUNNING, Status.SUCCESS):
+            out[f"rate_{s.name.lower()}"] = float((status == s).float().mean())
+    return out
+
+
+# ----------------------------------------------------------------------------- checkpoints
+def find_resume_checkpoint(resume) -> Path:
+    path = Path(str(resume)).expanduser()
+    if path.is_dir():
+        cands = [path / "checkpoints" / "last.pt", path / "last.pt"]
+        for c in cands:
+            if c.is_file():
+                return c
+        raise ConfigError(f"resume={resume}: no checkpoints/last.pt in that run directory")
+    if not path.is_file():
+        raise ConfigError(f"resume={resume}: no such run directory or checkpoint file")
+    return path
+
+
+def _rng_state(env: NavigationEnv) -> dict:
+    return {"torch": torch.get_rng_state(), "env": env.rng.get_state()}
+
+
+def restore_train_state(payload: dict, policy, critic_net, optim, env: NavigationEnv):
+    """Load policy (normaliser included), critic, optimiser and RNG states; return the counters."""
+    st = payload.get("train_state")
+    if not st or "optimizer" not in st:
+        raise ConfigError(
+            "that checkpoint holds no PPO training state (a shipped policy?); resume from a run's last.pt"
+        )
+    policy.load_state_dict(payload["policy"]["state_dict"])
+    critic_net.load_state_dict(st["critic"])
+    optim.load_state_dict(st["optimizer"])
+    torch.set_rng_state(st["rng"]["torch"])
+    env.rng.set_state(st["rng"]["env"])
+    return (
+        int(st["frames"]),
+        int(st["iteration"]),
+        float(st["wall_time"]),
+        float(st.get("best_success", -1.0)),
+        dict(st.get("best_metrics", {})),
+    )
+
+
+# ----------------------------------------------------------------------------- training
+def train(cfg, run_dir) -> dict:
+    run_dir = Path(run_dir)
+    check_config(cfg)
+    a = cfg.algo
+    # ---- config pulled into locals before the hot loop
+    obs_key = str(cfg.obs.view)
+    critic_key = str(cfg.obs.critic_view or obs_key)
+    num_envs = int(cfg.env.num_envs)
+    rollout_steps = int(a.rollout_steps)
+    frames_per_batch = num_envs * rollout_steps
+    total_frames = int(a.total_frames)
+    epochs, minibatch_size = int(a.epochs), int(a.minibatch_size)
+    n_minibatches = frames_per_batch // minibatch_size
+    lr, anneal_lr, max_grad_norm = float(a.lr), bool(a.anneal_lr), float(a.max_grad_norm)
+    checkpoint_every = int(cfg.checkpoint_every) if cfg.checkpoint_every else 0
+    log_every = int(a.log_every)
+    recompute_advantage = bool(a.recompute_advantage)
+    seed = int(cfg.seed)
+    role = str(cfg.get("role") or ("teacher" if obs_key.startswith("geo") else "baseline"))
+    target_success = float(a.target_success)
+    eval_episodes = int(a.final_eval_episodes)
+
+    torch.manual_seed(seed)
+    flow = build_flow(cfg.flow, device=cfg.device)
+    task = build_task(cfg.task, flow)
+    views = sorted({obs_key, critic_key})
+    env = build_env(cfg.env, flow, task, views, num_envs=num_envs, seed=seed, device=cfg.device)
+    low, high = env.action_spec.space.low[0].clone(), env.action_spec.space.high[0].clone()
+    policy, actor, critic_net, critic = make_actor_critic(obs_key, critic_key, low, high, a.actor, a.critic)
+
+    adv_module = GAE(gamma=float(a.gamma), lmbda=float(a.lmbda), value_network=critic, average_gae=False)
+    loss_module = ClipPPOLoss(
+        actor,
+        critic,
+        clip_epsilon=float(a.clip_epsilon),
+        entropy_bonus=float(a.entropy_coeff) > 0,
+        entropy_coeff=float(a.entropy_coeff),
+        critic_coeff=float(a.critic_coeff),
+        loss_critic_type=str(a.loss_critic_type),
+        normalize_advantage=bool(a.normalize_advantage),
+    )
+    optim = torch.optim.Adam(loss_module.parameters(), lr=lr, eps=1e-5)
+    buffer = ReplayBuffer(
+        storage=LazyTensorStorage(frames_per_batch),
+        sampler=SamplerWithoutReplacement(),
+        batch_size=minibatch_size,
+    )
+
+    # ---- resume or start
+    ckpt_dir = run_dir / "checkpoints"
+    frames, iteration, wall_offset, best_success = 0, 0, 0.0, -1.0
+    history_best = {}
+    if cfg.resume:
+        path = find_resume_checkpoint(cfg.resume)
+        payload = load_checkpoint(path)
+        if payload["obs"] != obs_key:
+            raise ConfigError(
+                f"resume={cfg.resume}: that run trained a policy on {payload['obs']!r} observations but this config "
+                f"asks for {obs_key!r}; resume with the same obs (obs={payload['obs']})"
+            )
+        frames, iteration, wall_offset, best_success, history_best = restore_train_state(
+            payload, policy, critic_net, optim, env
+        )
+    else:
+        # Warm the normalisers up on the first observations so the first batch sees sane inputs.
+        first = env.reset()
+        policy.normalizer.update(first[obs_key])
+        critic_net.normalizer.update(first[critic_key])
+
+    collector = Collector(
+        env,
+        actor,
+        frames_per_batch=frames_per_batch,
+        total_frames=-1,
+        device=cfg.device,
+        trust_policy=True,
+    )
+    logger = RunLogger(run_dir, cfg, total=total_frames, start=frames, wall_offset=wall_offset)
+
+    def save(name: str, metrics: dict) -> Path:
+        train_state = {
+            "frames": frames,
+            "iteration": iteration,
+            "wall_time": logger.elapsed,
+            "critic": critic_net.state_dict(),
+            "optimizer": optim.state_dict(),
+            "rng": _rng_state(env),
+            "best_success": best_success,
+            "best_metrics": history_best,
+        }
+        meta = {
+            "config": OmegaConf.to_container(cfg, resolve=True),
+            "frames": frames,
+            "iteration": iteration,
+            "metrics": metrics,
+        }
+        return save_policy_checkpoint(ckpt_dir / name, policy, obs_key, role, meta=meta, train_state=train_state)
+
+    # Per-slot running episode returns (an episode spans batches).
+    ep_return = torch.zeros(num_envs)
+    window_returns, window_success, window_times = [], [], []
+    t_start, frames_at_start = time.time(), frames
+    time_to_target = None
+    metrics: dict = {}
+    collector_iter = iter(collector)
+    try:
+        while frames < total_frames:
+            t_iter = time.time()
+            data = next(collector_iter)  # [B, T]
+            t_collect = time.time() - t_iter
+            frames += data.numel()
+            iteration += 1
+
+            # ---- episode statistics from this batch
+            nxt = data["next"]
+            rew = nxt["reward"].reshape(num_envs, rollout_steps)
+            done = nxt["done"].reshape(num_envs, rollout_steps)
+            status = nxt["status"].reshape(num_envs, rollout_steps)
+            etime = nxt["time"].reshape(num_envs, rollout_steps)
+            for t in range(rollout_steps):
+                ep_return += rew[:, t]
+                d = done[:, t]
+                if d.any():
+                    window_returns.append(ep_return[d].clone())
+                    window_success.append(status[d, t] == Status.SUCCESS)
+                    window_times.append(etime[d, t][status[d, t] == Status.SUCCESS])
+                    ep_return = torch.where(d, 0.0, ep_return)
+
+            # ---- PPO update
+            if anneal_lr:
+                for g in optim.param_groups:
+                    g["lr"] = lr * max(0.0, 1.0 - frames / total_frames)
+            t_train = time.time()
+            losses = []
+            for epoch in range(epochs):
+                if epoch == 0 or recompute_advantage:
+                    with torch.no_grad():
+                        adv_module(data)
+                buffer.extend(data.reshape(-1))
+                for _ in range(n_minibatches):
+                    batch = buffer.sample()
+                    loss = loss_module(batch)
+                    total = loss["loss_objective"] + loss["loss_critic"] + loss.get("loss_entropy", 0.0)
+                    optim.zero_grad(set_to_none=True)
+                    total.backward()
+                    gn = nn.utils.clip_grad_norm_(loss_module.parameters(), max_grad_norm)
+                    losses.append(torch.stack([loss["loss_objective"], loss["loss_critic"], gn]).detach())
+            # Normalisers move after the update: the next batch is collected with the new statistics.
+            policy.normalizer.update(data[obs_key])
+            critic_net.normalizer.update(data[critic_key])
+            collector.update_policy_weights_()
+            t_train = time.time() - t_train
+
+            # ---- logging
+            if iteration % log_every == 0 or frames >= total_frames:
+                n_eps = sum(len(r) for r in window_returns)
+                succ = torch.cat(window_success).float().mean().item() if n_eps else float("nan")
+                stimes = torch.cat(window_times) if n_eps else torch.empty(0)
+                lm = torch.stack(losses).mean(0)
+                metrics = {
+                    "train/episode_reward": torch.cat(window_returns).mean().item() if n_eps else float("nan"),
+                    "train/success_rate": succ,
+                    "train/success_time": stimes.mean().item() if stimes.numel() else float("nan"),
+                    "train/episodes": n_eps,
+                    "loss/objective": lm[0].item(),
+                    "loss/critic": lm[1].item(),
+                    "loss/grad_norm": lm[2].item(),
+                    "policy/scale": data["scale"].mean().item(),
+                    "perf/steps_per_s": (frames - frames_at_start) / max(time.time() - t_start, 1e-9),
+                    "perf/collect_s": t_collect,
+                    "perf/train_s": t_train,
+                    "lr": optim.param_groups[0]["lr"],
+                }
+                window_returns, window_success, window_times = [], [], []
+                if time_to_target is None and n_eps and succ >= target_success:
+                    time_to_target = logger.elapsed
+                    metrics["perf/minutes_to_target"] = time_to_target / 60
+                logger.log(frames, metrics)
+                if n_eps and succ > best_success:
+                    best_success = succ
+                    history_best = {"frames": frames, **metrics}
+                    save("best.pt", metrics)
+            if checkpoint_every and iteration % checkpoint_every == 0:
+                save("last.pt", metrics)
+    finally:
+        collector.shutdown()
+
+    save("last.pt", metrics)
+    final = {
+        "frames": frames,
+        "iterations": iteration,
+        "wall_time_s": logger.elapsed,
+        "best_train_success": best_success,
+    }
+    final.update({k: v for k, v in metrics.items() if not isinstance(v, str)})
+    if time_to_target is not None:
+        final["minutes_to_target"] = time_to_target / 60
+    if eval_episodes > 0:
+        eval_policy = DeterministicPolicy(**policy.config)
+        eval_policy.load_state_dict(policy.state_dict())
+
+        def make_env(n, offset):
+            return build_env(cfg.env, flow, task, [obs_key], num_envs=n, seed=10_000_019 + seed + offset)
+
+        res = evaluate_policy(eval_policy.eval(), make_env, obs_key, eval_episodes)
+        final.update({f"eval/{k}": v for k, v in res.items()})
+        logger.log(frames, {f"eval/{k}": v for k, v in res.items() if isinstance(v, int | float)})
+    logger.summary(final)
+    logger.close()
+    if cfg.get("output_checkpoint"):
+        import shutil
+
+        out = Path(str(cfg.output_checkpoint))
+        out.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(ckpt_dir / "last.pt", out)
+        final["output_checkpoint"] = str(out)
+    return final
