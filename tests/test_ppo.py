@@ -1,0 +1,137 @@
+"""PPO learns, checkpoints resume exactly where they stopped, the actor is a DeterministicPolicy."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+
+from flownav.checkpoint import CheckpointError, load_checkpoint, load_policy
+
+CONF = str(Path(__file__).resolve().parents[1] / "conf")
+
+# Still water, targets about 2 D away, short episodes: learnable in seconds.
+TINY = [
+    "flow=uniform",
+    "flow.velocity=[0.0,0.0,0.0]",
+    "task.start=[[5.0,0.0,5.0],[6.0,1.0,6.0]]",
+    "task.target=[[7.0,0.0,5.0],[8.0,1.0,6.0]]",
+    "env.num_envs=256",
+    "env.dt=0.5",
+    "env.time_limit=15.0",
+    "env.reward.time_penalty=0.1",
+    "algo.rollout_steps=16",
+    "algo.minibatch_size=1024",
+    "algo.actor.hidden=[64,64]",
+    "algo.critic.hidden=[64,64]",
+    "logger=csv",
+    "logger.progress=false",
+    "threads=1",
+]
+
+
+def make_cfg(*overrides):
+    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
+        return compose("config", overrides=["+experiment=teacher", *TINY, *overrides])
+
+
+def rows(run_dir):
+    return list(csv.DictReader(open(Path(run_dir) / "metrics.csv", newline="")))
+
+
+@pytest.mark.slow
+def test_ppo_learns_tiny_navigation(tmp_path):
+    from train import run
+
+    cfg = make_cfg("algo.total_frames=200000", "algo.lr=1e-3", "algo.final_eval_episodes=1000")
+    out = run(cfg, tmp_path)
+    first = float(rows(tmp_path)[0]["train/success_rate"])
+    assert first < 0.3, f"the untrained policy should rarely succeed, got {first}"
+    assert out["eval/success_rate"] > 0.8, out
+    # the shipped policy is a plain deterministic policy on the geo view
+    policy, payload = load_policy(tmp_path / "checkpoints" / "last.pt", expect_obs="geo")
+    assert payload["role"] == "teacher" and policy.config["n_outputs"] == 6
+    with pytest.raises(CheckpointError, match="ego"):
+        load_policy(tmp_path / "checkpoints" / "last.pt", expect_obs="ego")
+
+
+def test_deterministic_action_is_tanh_of_loc():
+    from flownav.algorithms.ppo import make_actor_critic
+    from tensordict import TensorDict
+    from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+    cfg = make_cfg()
+    low, high = torch.tensor([0.0, -0.785, -1.57]), torch.tensor([1.0, 0.785, 1.57])
+    policy, actor, _, _ = make_actor_critic("geo", "geo", low, high, cfg.algo.actor, cfg.algo.critic)
+    torch.nn.init.normal_(policy.net[-1].weight)  # non-trivial locations
+    obs = torch.randn(64, 8) * 3
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        td = actor(TensorDict({"geo": obs}, batch_size=[64]))
+    torch.testing.assert_close(td["action"], policy(obs), rtol=1e-5, atol=1e-5)
+
+
+def test_resume_continues_step_optimizer_and_normalizer(tmp_path):
+    from flownav.algorithms import ppo
+    from train import run
+
+    batch = 256 * 16
+    cfg = make_cfg(f"algo.total_frames={2 * batch}", "checkpoint_every=1", "algo.final_eval_episodes=0")
+    run(cfg, tmp_path)
+    saved = load_checkpoint(tmp_path / "checkpoints" / "last.pt")
+    assert saved["train_state"]["frames"] == 2 * batch and saved["train_state"]["iteration"] == 2
+
+    # restore_train_state puts exactly the saved tensors back
+    from flownav.builders import build_env, build_flow, build_task
+
+    flow = build_flow(cfg.flow)
+    env = build_env(cfg.env, flow, build_task(cfg.task, flow), ["geo"], num_envs=8)
+    low, high = env.action_spec.space.low[0], env.action_spec.space.high[0]
+    policy, _, critic_net, critic = ppo.make_actor_critic("geo", "geo", low, high, cfg.algo.actor, cfg.algo.critic)
+    params = list(policy.parameters()) + list(critic_net.parameters())
+    optim = torch.optim.Adam(params, lr=1e-3)
+    frames, it, *_ = ppo.restore_train_state(saved, policy, critic_net, optim, env)
+    assert (frames, it) == (2 * batch, 2)
+    for k, v in saved["policy"]["state_dict"].items():
+        torch.testing.assert_close(policy.state_dict()[k], v, rtol=0, atol=0)
+    assert saved["policy"]["state_dict"]["normalizer.count"] > 0
+    for k, v in saved["train_state"]["critic"].items():
+        torch.testing.assert_close(critic_net.state_dict()[k], v, rtol=0, atol=0)
+    for (_, a), (_, b) in zip(
+        sorted(optim.state_dict()["state"].items()),
+        sorted(saved["train_state"]["optimizer"]["state"].items()),
+        strict=True,
+    ):
+        for key in ("exp_avg", "exp_avg_sq", "step"):
+            torch.testing.assert_close(a[key], b[key], rtol=0, atol=0)
+
+    # the resumed run continues from the saved step and writes into the same directory
+    cfg2 = make_cfg(
+        f"algo.total_frames={3 * batch}", "checkpoint_every=1", "algo.final_eval_episodes=0", f"resume={tmp_path}"
+    )
+    run(cfg2, tmp_path / "elsewhere")
+    steps = [int(r["step"]) for r in rows(tmp_path)]
+    assert steps == [batch, 2 * batch, 3 * batch]
+    last = load_checkpoint(tmp_path / "checkpoints" / "last.pt")
+    st = last["train_state"]
+    assert st["frames"] == 3 * batch and st["iteration"] == 3
+    # Adam kept counting from the saved state: 3 iterations x epochs x minibatches steps in total
+    n_steps = 3 * cfg.algo.epochs * (batch // cfg.algo.minibatch_size)
+    assert all(int(s["step"]) == n_steps for s in st["optimizer"]["state"].values())
+    # the normaliser kept its statistics: warm-up reset + 3 batches of observations
+    assert float(last["policy"]["state_dict"]["normalizer.count"]) == 256 + 3 * batch
+
+
+def test_resume_refuses_other_view(tmp_path):
+    from flownav.builders import ConfigError
+    from train import run
+
+    run(make_cfg("algo.total_frames=4096", "algo.final_eval_episodes=0"), tmp_path)
+    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
+        cfg = compose(
+            "config", overrides=["+experiment=baseline_ego", *TINY, "algo.total_frames=8192", f"resume={tmp_path}"]
+        )
+    with pytest.raises(ConfigError, match="geo"):
+        run(cfg, tmp_path / "x")
