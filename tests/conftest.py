@@ -23,7 +23,7 @@ def smooth_wake_like_field(shape=(6, 21, 13, 8), seed=0) -> np.ndarray:
     return np.stack(np.broadcast_arrays(u, v, w), -1).astype(np.float32)
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def wake_like_flow() -> GridFlow:
     T, nx, ny, nz = 6, 21, 13, 8
     lo, hi = WAKE_BOUNDS.lo, WAKE_BOUNDS.hi
