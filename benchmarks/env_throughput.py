@@ -51,20 +51,35 @@ def make_grid() -> tuple[np.ndarray, tuple, tuple]:
     return torch.stack(frames).numpy(), lo, spacing
 
 
+def best_window_rate(step, per_call: int, seconds: float, windows: int = 5) -> float:
+    """Items/s of ``step`` in the best of several equal windows.
+
+    The machine is shared (2 cores); the best window is the least disturbed one. Every window
+    runs the full workload, resets included, so the rate is a sustained one, not a best call.
+    """
+    best = 0.0
+    for _ in range(windows):
+        calls, start = 0, time.perf_counter()
+        while time.perf_counter() - start < seconds / windows or calls < 3:
+            step()
+            calls += 1
+        best = max(best, per_call * calls / (time.perf_counter() - start))
+    return best
+
+
 def bench_batched(flow: GridFlow, batch: int, seconds: float) -> float:
     env = NavigationEnv(flow, num_envs=batch, views=("geo", "ego"), seed=0)
-    td = env.reset()
+    state = {"td": env.reset()}
     action = env.action_spec.rand()
-    td["action"] = action
+
+    def step():
+        td = state["td"]
+        td["action"] = action
+        _, state["td"] = env.step_and_maybe_reset(td)
+
     for _ in range(3):
-        _, td = env.step_and_maybe_reset(td)
-        td["action"] = action
-    steps, start = 0, time.perf_counter()
-    while time.perf_counter() - start < seconds or steps < 5:
-        _, td = env.step_and_maybe_reset(td)
-        td["action"] = action
-        steps += 1
-    return batch * steps / (time.perf_counter() - start)
+        step()
+    return best_window_rate(step, batch, seconds)
 
 
 class ReferenceSwimmer:
@@ -135,18 +150,18 @@ def bench_reference(grid, origin, spacing, seconds: float, n_swimmers: int = 64)
     swimmers = [ReferenceSwimmer(grid, origin, spacing, rng) for _ in range(n_swimmers)]
     lo, hi = np.array([0.0, -math.pi / 4, -math.pi / 2]), np.array([1.0, math.pi / 4, math.pi / 2])
     action = rng.uniform(lo, hi)
-    steps, start = 0, time.perf_counter()
-    while time.perf_counter() - start < seconds:
+
+    def step():
         for s in swimmers:
             s.step(action)
-        steps += n_swimmers
-    return steps / (time.perf_counter() - start)
+
+    return best_window_rate(step, n_swimmers, seconds)
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--seconds", type=float, default=3.0, help="time per measurement")
+    parser.add_argument("--seconds", type=float, default=5.0, help="time per measurement (split in 5 windows)")
     parser.add_argument("--batches", type=int, nargs="+", default=[1024, 4096, 16384, 65536])
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
@@ -163,7 +178,9 @@ def main():
     write_result(
         "env_throughput",
         {
-            "what": "swimmer-steps/s of NavigationEnv.step_and_maybe_reset (geo+ego views) vs a per-swimmer numpy loop",
+            "what": "swimmer-steps/s of NavigationEnv.step_and_maybe_reset (geo+ego views) vs a per-swimmer "
+            "numpy loop; "
+            "best of 5 windows each (shared machine)",
             "command": "python benchmarks/env_throughput.py " + " ".join(sys.argv[1:]),
             "grid": {"frames": SHAPE[0], "points": SHAPE[1] * SHAPE[2] * SHAPE[3], "shape": list(SHAPE)},
             "machine": machine(),

@@ -244,3 +244,15 @@ def test_function_flow_checks_its_output_shape():
 def test_box_refuses_inverted_bounds():
     with pytest.raises(ValueError, match="must exceed"):
         Box((0, 0, 0), (1, -1, 1))
+
+
+@pytest.mark.slow
+def test_look_up_is_exact_in_tables_beyond_float32_integer_range():
+    """Row indices of a table with more than 2^24 rows must be computed in integers."""
+    nx = 2**22 + 1000  # nx x 2 x 2 points x 2 frames: about 16.8M table rows
+    field = torch.rand(2, nx, 2, 2, 3, generator=torch.Generator().manual_seed(0)).half()
+    flow = GridFlow(field, (0, 0, 0), (1, 1, 1), 1.0, dtype=torch.float16)
+    k = torch.tensor([nx - 3, nx - 77, nx // 2 + 3])
+    pos = torch.stack((k.float(), torch.zeros(3), torch.zeros(3)), -1)
+    got = flow.velocity(pos, torch.ones(3))  # float32 positions, as in the environment
+    assert torch.equal(got.float(), field[1, k, 0, 0].float())

@@ -131,7 +131,8 @@ class GridFlow(FlowField):
         y0, wy = self._axis(pos[:, 1], 1)
         z0, wz = self._axis(pos[:, 2], 2)
         sx, sy, sz, st = self._row_strides
-        row = (x0 * sx + y0 * sy + z0 * sz + f0 * st).long()
+        # Integer arithmetic: float32 is exact only up to 2^24, far below a big table's row count.
+        row = x0.long() * sx + y0.long() * sy + z0.long() * sz + f0.long() * st
         rows = torch.stack((row, row + sx, row + sy, row + sx + sy), 1)  # (x0,y0), (x1,y0), (x0,y1), (x1,y1)
         c = self._table.index_select(0, rows.reshape(-1)).view(-1, 2, 2, 2, 2, 3).to(pos.dtype)  # [N, y, x, z, t, 3]
         # Linear in t, then z, x, y; each pass halves the corners (contiguous halves: fastest here).
