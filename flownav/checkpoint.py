@@ -14,13 +14,13 @@ Writes are atomic (temporary file, then rename), so a kill never leaves half a c
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import torch
 from tensordict.nn import TensorDictModule
 
 from flownav.agents.networks import DeterministicPolicy
+from flownav.atomic import atomic_write
 from flownav.envs.observations import observation_size
 
 FORMAT = "flownav-policy-v1"
@@ -31,18 +31,7 @@ class CheckpointError(ValueError):
 
 
 def atomic_torch_save(obj, path: str | os.PathLike) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
-    os.close(fd)
-    try:
-        torch.save(obj, tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    return atomic_write(path, lambda f: torch.save(obj, f))
 
 
 def save_policy_checkpoint(

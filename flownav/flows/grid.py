@@ -24,7 +24,6 @@ import hashlib
 import json
 import math
 import os
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -32,6 +31,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from flownav.atomic import atomic_write
 from flownav.flows.base import Box, Cylinder, FlowField, obstacle_from_dict
 
 FORMAT = "flownav-grid-v1"
@@ -169,20 +169,6 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def _atomic_write_bytes(path: Path, write) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def save_grid_flow(
     path: str | os.PathLike,
     velocity: np.ndarray,
@@ -203,7 +189,7 @@ def save_grid_flow(
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
     stored = np.ascontiguousarray(velocity.astype(dtype))
-    _atomic_write_bytes(path / VELOCITY_FILE, lambda f: np.save(f, stored))
+    atomic_write(path / VELOCITY_FILE, lambda f: np.save(f, stored))
     n = velocity.shape[1:4]
     if bounds is None:
         bounds = Box(
@@ -227,7 +213,7 @@ def save_grid_flow(
         "sha256": {VELOCITY_FILE: _sha256(path / VELOCITY_FILE)},
     }
     text = json.dumps(meta, indent=2).encode()
-    _atomic_write_bytes(path / META_FILE, lambda f: f.write(text))
+    atomic_write(path / META_FILE, lambda f: f.write(text))
     return path
 
 
