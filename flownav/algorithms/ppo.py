@@ -98,6 +98,23 @@ def make_actor_critic(obs_key: str, critic_key: str, low, high, actor_cfg, criti
     return policy, actor, critic_net, critic
 
 
+@torch.no_grad()
+def update_normalizer(norm: ObsNormalizer, x) -> None:
+    """``norm.update(x)`` keeping the buffers' identity.
+
+    ``ObsNormalizer.update`` rebinds ``var`` and ``count`` to new tensors; TorchRL losses hold the
+    actor's and critic's buffers captured at construction, so a rebinding would leave the loss
+    scoring with stale statistics while the collector acts with fresh ones (a growing, spurious KL).
+    """
+    old = {k: getattr(norm, k) for k in ("mean", "var", "count")}
+    norm.update(x)
+    for k, t in old.items():
+        new = getattr(norm, k)
+        if new is not t:
+            t.copy_(new)
+            setattr(norm, k, t)
+
+
 # ----------------------------------------------------------------------------- config checks
 def check_config(cfg) -> None:
     """Fail at start, naming the key, on values Hydra's types cannot catch."""
@@ -230,6 +247,7 @@ def train(cfg, run_dir) -> dict:
     checkpoint_every = int(cfg.checkpoint_every) if cfg.checkpoint_every else 0
     log_every = int(a.log_every)
     recompute_advantage = bool(a.recompute_advantage)
+    normalize_online = bool(a.update_normalizer)
     seed = int(cfg.seed)
     role = str(cfg.get("role") or ("teacher" if obs_key.startswith("geo") else "baseline"))
     target_success = float(a.target_success)
@@ -276,20 +294,29 @@ def train(cfg, run_dir) -> dict:
         frames, iteration, wall_offset, best_success, history_best = restore_train_state(
             payload, policy, critic_net, optim, env
         )
+    elif a.get("init_from"):
+        # Warm start: weights, normalisers (and optimiser moments) from another run; counters from zero.
+        payload = load_checkpoint(str(a.init_from))
+        if payload["obs"] != obs_key:
+            raise ConfigError(f"algo.init_from={a.init_from} reads {payload['obs']!r}, this run reads {obs_key!r}")
+        policy.load_state_dict(payload["policy"]["state_dict"])
+        if payload.get("train_state") and "critic" in payload["train_state"]:
+            critic_net.load_state_dict(payload["train_state"]["critic"])
     else:
         # Warm the normalisers up on the first observations so the first batch sees sane inputs.
         first = env.reset()
-        policy.normalizer.update(first[obs_key])
-        critic_net.normalizer.update(first[critic_key])
+        update_normalizer(policy.normalizer, first[obs_key])
+        update_normalizer(critic_net.normalizer, first[critic_key])
 
     collector = Collector(
         env,
         actor,
         frames_per_batch=frames_per_batch,
         total_frames=-1,
-        device=cfg.device,
         trust_policy=True,
     )
+    if collector.policy is not actor:  # a copy would only see weights, not the normaliser buffers
+        raise RuntimeError("the collector copied the actor; PPO needs it to step the live policy")
     logger = RunLogger(run_dir, cfg, total=total_frames, start=frames, wall_offset=wall_offset)
 
     def save(name: str, metrics: dict) -> Path:
@@ -359,10 +386,23 @@ def train(cfg, run_dir) -> dict:
                     optim.zero_grad(set_to_none=True)
                     total.backward()
                     gn = nn.utils.clip_grad_norm_(loss_module.parameters(), max_grad_norm)
-                    losses.append(torch.stack([loss["loss_objective"], loss["loss_critic"], gn]).detach())
+                    optim.step()
+                    losses.append(
+                        torch.stack(
+                            [
+                                loss["loss_objective"],
+                                loss["loss_critic"],
+                                gn,
+                                loss["kl_approx"],
+                                loss["clip_fraction"],
+                                loss["explained_variance"].reshape(()),
+                            ]
+                        ).detach()
+                    )
             # Normalisers move after the update: the next batch is collected with the new statistics.
-            policy.normalizer.update(data[obs_key])
-            critic_net.normalizer.update(data[critic_key])
+            if normalize_online:
+                update_normalizer(policy.normalizer, data[obs_key])
+                update_normalizer(critic_net.normalizer, data[critic_key])
             collector.update_policy_weights_()
             t_train = time.time() - t_train
 
@@ -380,6 +420,9 @@ def train(cfg, run_dir) -> dict:
                     "loss/objective": lm[0].item(),
                     "loss/critic": lm[1].item(),
                     "loss/grad_norm": lm[2].item(),
+                    "loss/kl_approx": lm[3].item(),
+                    "loss/clip_fraction": lm[4].item(),
+                    "loss/explained_variance": lm[5].item(),
                     "policy/scale": data["scale"].mean().item(),
                     "perf/steps_per_s": (frames - frames_at_start) / max(time.time() - t_start, 1e-9),
                     "perf/collect_s": t_collect,

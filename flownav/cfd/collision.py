@@ -52,7 +52,11 @@ def kbc(lat: Lattice, f: list[Tensor], beta: Tensor | float) -> list[Tensor]:
     feq, df = [], []
     for ci, wi, fi in zip(lat.c, lat.w, f, strict=True):
         cu = _dot(ci, (ux, uy, uz))
-        feq_i = wi * rho * (1 - usq15) if cu is None else wi * rho * (1 + 3 * cu + 4.5 * cu * cu - usq15)
+        feq_i = (
+            wi * rho * (1 - usq15)
+            if cu is None
+            else wi * rho * (1 + 3 * cu + 4.5 * cu * cu - usq15)
+        )
         feq.append(feq_i)
         df.append(fi - feq_i)
     # Non-equilibrium second moment and its traceless part.

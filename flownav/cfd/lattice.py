@@ -39,7 +39,9 @@ class Lattice:
 
 def _make(name: str) -> Lattice:
     # Weight by the number of non-zero components: rest, faces, edges, corners.
-    weights = {"D3Q19": (1 / 3, 1 / 18, 1 / 36, 0.0), "D3Q27": (8 / 27, 2 / 27, 1 / 54, 1 / 216)}[name]
+    weights = {"D3Q19": (1 / 3, 1 / 18, 1 / 36, 0.0), "D3Q27": (8 / 27, 2 / 27, 1 / 54, 1 / 216)}[
+        name
+    ]
     cs, ws = [], []
     for ci in itertools.product((0, 1, -1), repeat=3):
         wi = weights[sum(a != 0 for a in ci)]
@@ -59,7 +61,7 @@ def get_lattice(name: str) -> Lattice:
 
 
 def equilibrium(lat: Lattice, rho: Tensor, u: Tensor) -> Tensor:
-    """Second-order equilibrium ``f_eq[Q, ...]`` for density ``rho[...]`` and velocity ``u[3, ...]``."""
+    """Second-order equilibrium ``f_eq[Q, ...]`` of density ``rho[...]``, velocity ``u[3, ...]``."""
     c = lat.c_tensor(rho.dtype, rho.device)
     w = lat.w_tensor(rho.dtype, rho.device)
     cu = torch.einsum("qd,d...->q...", c, u)

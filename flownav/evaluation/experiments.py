@@ -17,6 +17,7 @@ that says which command produces it; the rest of the suite still runs.
 from __future__ import annotations
 
 import hashlib
+import json
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -126,10 +127,16 @@ class Suite:
         out["paper"] = _plain(spec.get("paper")) or {}
         out["missing"] = []
         out["policies"] = {}
+        for pol in _policy_names(spec):  # report every missing checkpoint, even if the flow is missing too
+            try:
+                self.policy(pol)
+            except Missing as e:
+                out["missing"].append(f"{pol}: {e}")
         try:
             out.update(fn(name, spec, out))
         except Missing as e:
             out["missing"].append(str(e))
+        out["missing"] = list(dict.fromkeys(out["missing"]))
         out["seconds"] = round(time.time() - t0, 2)
         return out
 
@@ -248,8 +255,9 @@ class Suite:
     def _run_figures(self, name, spec, out) -> dict:
         from flownav.viz import trajectories as tv
 
-        figures, notes = [], []
+        figures = []
         seed = int(spec.get("seed", self.seed))
+        notes: list[str] = []
         # Fig. 3: the three policies from one start to one target in the training flow.
         wake = spec.wake
         try:
@@ -259,12 +267,15 @@ class Suite:
             flow = None
         if flow is not None:
             env_cfg = self.env_cfg(wake)
-            runs = {}
+            # Same candidate episodes for every policy; show the first that the preferred policies all solve.
+            n = int(wake.get("candidates", 32))
+            cands = {}
             for pol in self._each_policy(wake, out):
-                runs[pol] = self.rollout(
-                    pol, flow, wake.task, env_cfg, 1, seed=seed + int(wake.get("episode", 0)), record=1
-                ).trajectories
+                cands[pol] = self.rollout(pol, flow, wake.task, env_cfg, n, seed=seed, record=n).trajectories
+            i = _pick_episode(cands, list(wake.get("prefer_success", ["teacher", "student"])))
+            runs = {pol: _slice_traj(tr, i) for pol, tr in cands.items()}
             if runs:
+                notes.append(f"wake figures show candidate episode {i} of {n} (seed {seed})")
                 figures.append(
                     tv.plot_trajectories_3d(
                         runs,
@@ -329,7 +340,38 @@ class Suite:
         if not runs:
             raise Missing(f"no DAgger runs found ({list(spec.run_globs)}): run `{spec.command}`")
         fig, stats = plot_loss_curves(runs, self.figures_dir / f"{name}.png", key=str(spec.get("key", "train/loss")))
+        if spec.get("json"):
+            path = resolve(str(spec.json))
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps(stats | {"files": sorted(runs)}, indent=1))
         return {"runs": sorted(runs), "curve": stats, "figures": [str(fig)]}
+
+
+def _pick_episode(runs: dict, prefer: list[str]) -> int:
+    """First episode that all preferred policies solve; else the first the last preferred one solves; else 0."""
+    from flownav.envs.navigation import Status
+
+    wins = {p: runs[p]["status"] == Status.SUCCESS for p in prefer if p in runs}
+    if not wins:
+        return 0
+    options = [torch.stack(list(wins.values())).all(0)] + [wins[p] for p in reversed(list(wins))]
+    for ok in options:
+        if bool(ok.any()):
+            return int(ok.nonzero()[0, 0])
+    return 0
+
+
+def _slice_traj(traj: dict, i: int) -> dict:
+    return {k: (v if k == "time" else v[i : i + 1]) for k, v in traj.items()}
+
+
+def _policy_names(spec) -> list[str]:
+    names = list(spec.get("policies") or [])
+    for sub in ("wake", "misaligned", "abc"):
+        node = spec.get(sub)
+        if isinstance(node, Mapping) or OmegaConf.is_dict(node):
+            names += list(node.get("policies") or [])
+    return list(dict.fromkeys(names))
 
 
 KINDS = ("success", "extended", "misalignment", "ratio_sweep", "figures", "loss_curves")

@@ -252,7 +252,7 @@ def load_grid_flow(path: str | os.PathLike, device="cpu", dtype=torch.float32, v
         raise GridFlowError(f"cannot read {vel_path} ({e}): {regen}") from e
     if list(arr.shape) != list(meta["shape"]):
         raise GridFlowError(f"{vel_path} has shape {list(arr.shape)} but meta.json says {meta['shape']}: {regen}")
-    tensor = torch.from_numpy(np.ascontiguousarray(arr))
+    tensor = torch.from_numpy(np.array(arr))  # a writable in-memory copy of the memory map
     check_velocity_array(tensor.shape, bool(torch.isfinite(tensor).all()))
     b = meta["bounds"]
     return GridFlow(

@@ -1,0 +1,126 @@
+"""Evaluation throughput: wall time of 10,000 deterministic episodes (goal: <= 60 s on this 2-core CPU).
+
+    python benchmarks/eval_throughput.py            # -> benchmarks/results/eval_throughput.json
+
+Worst case: every episode lasts the full time limit (300 steps of dt = 0.2). A synthetic grid flow of the
+CFD dataset's size (spacing 0.2 over the wake box, 40 frames) with tiny velocities keeps all 10,000
+swimmers in the domain until they time out, so each step costs a full-batch flow look-up, env step and
+policy call (a student-sized 256 x 256 MLP). Measured for 1 and 2 torch threads. When the real dataset
+and checkpoints exist, the shipped teacher and student on the real wake are timed as well.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from flownav.agents import DeterministicPolicy  # noqa: E402
+from flownav.envs import NavigationEnv, RegionTask  # noqa: E402
+from flownav.evaluation.metrics import summarize  # noqa: E402
+from flownav.evaluation.rollout import run_episodes  # noqa: E402
+from flownav.evaluation.scripted import ACTION_LOW, action_high  # noqa: E402
+from flownav.flows import GridFlow  # noqa: E402
+from flownav.flows.base import WAKE_BOUNDS, Cylinder  # noqa: E402
+
+EPISODES = 10_000
+TARGET_S = 60.0
+
+
+def synthetic_wake(frames: int = 40, spacing: float = 0.2, span: float = 4.0) -> GridFlow:
+    lo, hi = WAKE_BOUNDS.lo, WAKE_BOUNDS.hi
+    nx, ny, nz = round((hi[0] - lo[0]) / spacing) + 1, round((hi[1] - lo[1]) / spacing) + 1, round(span / spacing)
+    g = torch.Generator().manual_seed(0)
+    vel = 0.002 * torch.randn(frames, nx, ny, nz, 3, generator=g)
+    return GridFlow(vel, origin=lo, spacing=(spacing, spacing, spacing), dt=0.25, periodic=(False, False, True),
+                    bounds=WAKE_BOUNDS, obstacles=[Cylinder((0.0, 0.0), 0.5)])
+
+
+class Hover(torch.nn.Module):
+    """The policy's full cost, but zero swim speed: in the near-still synthetic flow nobody leaves or arrives."""
+
+    def __init__(self, policy):
+        super().__init__()
+        self.policy = policy
+
+    def forward(self, obs):
+        a = self.policy(obs)
+        return torch.cat((a[:, :1] * 0, a[:, 1:]), -1)
+
+
+def time_eval(policy, obs: str, flow, threads: int, episodes: int = EPISODES, chunk: int = EPISODES, **env_kw) -> dict:
+    torch.set_num_threads(threads)
+
+    def make_env(n, c):
+        return NavigationEnv(flow, RegionTask(), num_envs=n, views=(obs,), seed=c, **env_kw)
+
+    run_episodes(policy, obs, make_env, 256, 256)  # warm-up
+    t0 = time.perf_counter()
+    ep = run_episodes(policy, obs, make_env, episodes, chunk)
+    seconds = time.perf_counter() - t0
+    s = summarize(ep.status, ep.time)
+    steps = float(ep.time.sum() / 0.2)
+    return {
+        "threads": threads,
+        "episodes": episodes,
+        "chunk_size": chunk,
+        "seconds": round(seconds, 2),
+        "episodes_per_s": round(episodes / seconds, 1),
+        "swimmer_steps_per_s": round(steps / seconds),
+        "mean_episode_steps": round(steps / episodes, 1),
+        "success_rate": s["success_rate"],
+    }
+
+
+def main() -> None:
+    out = {"goal": f"{EPISODES} episodes in <= {TARGET_S:.0f} s", "host": f"{platform.machine()}, "
+           f"{torch.get_num_threads()} default torch threads, torch {torch.__version__}", "runs": {}}
+    try:
+        load = Path("/proc/loadavg").read_text().split()[:3]
+        out["load_average_at_start"] = [float(x) for x in load]
+    except OSError:
+        pass
+    flow = synthetic_wake()
+    student = DeterministicPolicy(6, ACTION_LOW, action_high(), hidden=(256, 256))
+    teacher = DeterministicPolicy(8, ACTION_LOW, action_high(), hidden=(128, 128), n_outputs=6)
+    for threads in (1, 2):
+        for name, pol, obs in (("student_256x256", Hover(student), "ego"), ("teacher_128x128", Hover(teacher), "geo")):
+            key = f"worst_case_{name}_threads{threads}"
+            out["runs"][key] = time_eval(pol, obs, flow, threads, random_flow_phase=True)
+            print(key, out["runs"][key], flush=True)
+
+    data, ck = ROOT / "data" / "cylinder_re300", ROOT / "checkpoints"
+    if (data / "meta.json").is_file():
+        from flownav.checkpoint import load_policy
+        from flownav.flows.grid import load_grid_flow
+
+        wake = load_grid_flow(data)
+        for name in ("teacher", "student"):
+            path = ck / f"{name}.pt"
+            if path.is_file():
+                pol, payload = load_policy(path)
+                key = f"real_wake_{name}_threads1"
+                out["runs"][key] = time_eval(pol, payload["obs"], wake, 1)
+                print(key, out["runs"][key], flush=True)
+    best = min(out["runs"].values(), key=lambda r: r["seconds"])
+    worst1 = out["runs"]["worst_case_student_256x256_threads1"]
+    out["headline"] = (
+        f"{EPISODES} episodes, all lasting the full 300 steps, student-sized policy: {worst1['seconds']:.1f} s "
+        f"with 1 thread ({worst1['swimmer_steps_per_s']:,} swimmer-steps/s); goal <= {TARGET_S:.0f} s "
+        f"({'met' if worst1['seconds'] <= TARGET_S else 'NOT met'}); fastest configuration: {best['seconds']:.1f} s"
+    )
+    path = ROOT / "benchmarks" / "results" / "eval_throughput.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(out, indent=1))
+    print(out["headline"])
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,205 @@
+"""PPO training throughput, TorchRL pipeline vs a plain-torch collection loop, and minutes to 90% success.
+
+    python benchmarks/train_throughput.py                                   # default flow (cylinder if present)
+    python benchmarks/train_throughput.py --flow vortex_street --run runs/tune/vs_B
+
+Writes benchmarks/results/train_throughput.json. Measured in one process, same threads:
+
+* ``agent_steps_per_s``: end-to-end PPO of the teacher config (Collector + GAE + ClipPPOLoss epochs +
+  normaliser update), swimmer steps per second over ``--iterations`` iterations after one warm-up.
+* ``torchrl_collect_steps_per_s``: the Collector alone (policy sampling + env steps + auto-reset).
+* ``plain_collect_steps_per_s``: the same physics (flownav.envs.kinematics, the flow, the reward, the
+  geo view) and the same policy MLP (normaliser, TanhNormal sample) as plain tensors, no TensorDict.
+* ``torchrl_over_plain``: torchrl / plain collection speed (1.0 = no overhead).
+* ``minutes_to_90pct``: wall time from the start of a teacher training run to the first logged
+  ``train/success_rate`` >= 0.9, read from that run's metrics.csv (``--run``; a training run
+  of 30+ minutes is not repeated inside the benchmark). ``null`` if no run reached it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from common import machine, write_result  # noqa: E402
+
+from flownav.algorithms.report import compose_config  # noqa: E402
+from flownav.envs.kinematics import heading_vector, move, turn  # noqa: E402
+from flownav.envs.observations import State, compute_views  # noqa: E402
+from flownav.envs.reward import step_reward  # noqa: E402
+
+
+def plain_collect(env, policy, steps: int) -> float:
+    """Collection with plain tensors: the env's physics functions, its reset sampler, the same MLP."""
+    B, dt, cfg, flow = env.num_envs, env.dt, env.reward_cfg, env.flow
+    low, high = env.action_spec.space.low[0], env.action_spec.space.high[0]
+    pos, target, theta, psi, t0 = env._sample_episodes(B)
+    time_ = torch.zeros(B)
+    flow_vel = flow.velocity(pos, t0)
+    vel = flow_vel.clone()
+    d0 = (target - pos).norm(dim=-1)
+    dist = d0.clone()
+
+    def observe():
+        s = State(target - pos, vel, flow_vel, theta, psi, None)
+        return compute_views(s, ["geo"])["geo"]
+
+    obs = observe()
+    t_start = time.perf_counter()
+    with torch.no_grad():
+        for _ in range(steps):
+            out = policy.net(policy.normalizer(obs))
+            loc, scale = out[:, :3], torch.nn.functional.softplus(out[:, 3:] + 0.0) + 1e-3
+            u = torch.tanh(loc + scale * torch.randn_like(loc))
+            action = low + (high - low) * (u + 1) / 2
+            logp = torch.distributions.Normal(loc, scale).log_prob(torch.atanh(u.clamp(-0.999, 0.999))).sum(-1)
+            del logp
+            theta, psi = turn(theta, psi, action[:, 1], action[:, 2], dt)
+            swim = action[:, :1] * heading_vector(theta, psi)
+            pos, _ = move(pos, swim, flow_vel, dt)
+            time_ = time_ + dt
+            flow_vel = flow.velocity(pos, t0 + time_)
+            vel = swim + flow_vel
+            prev, dist = dist, (target - pos).norm(dim=-1)
+            success = dist < cfg.success_radius
+            reward = step_reward(cfg, prev, dist, d0, success, dt)
+            del reward
+            done = success | ~flow.in_domain(pos) | flow.in_obstacle(pos) | (time_ >= env.time_limit - 1e-6)
+            if done.any():
+                idx = done.nonzero().squeeze(-1)
+                p, tg, th, ps, tt = env._sample_episodes(idx.numel())
+                pos, target, theta, psi, t0 = (
+                    pos.index_put((idx,), p),
+                    target.index_put((idx,), tg),
+                    theta.index_put((idx,), th),
+                    psi.index_put((idx,), ps),
+                    t0.index_put((idx,), tt),
+                )
+                time_ = time_.index_put((idx,), torch.zeros_like(tt))
+                fv = flow.velocity(p, tt)
+                flow_vel, vel = flow_vel.index_put((idx,), fv), vel.index_put((idx,), fv)
+                d0 = d0.index_put((idx,), (tg - p).norm(dim=-1))
+                dist = dist.index_put((idx,), (tg - p).norm(dim=-1))
+            obs = observe()
+    return B * steps / (time.perf_counter() - t_start)
+
+
+def minutes_to_target(run_dirs, target: float = 0.9):
+    best = None
+    for run in run_dirs:
+        path = Path(run) / "metrics.csv"
+        if not path.is_file():
+            continue
+        for r in csv.DictReader(open(path, newline="")):
+            v = r.get("train/success_rate")
+            if v not in (None, "", "nan") and float(v) >= target:
+                m = float(r["wall_time"]) / 60
+                if best is None or m < best[0]:
+                    best = (m, str(run), int(float(r["step"])))
+                break
+    return best
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--flow", default=None, help="flow config (default: cylinder if its dataset exists)")
+    p.add_argument("--iterations", type=int, default=5)
+    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--run", action="append", default=[], help="teacher run dir(s) for minutes_to_90pct")
+    p.add_argument("--override", action="append", default=[])
+    args = p.parse_args(argv)
+    torch.set_num_threads(args.threads)
+
+    flow_name = args.flow or ("cylinder" if (ROOT / "data/cylinder_re300/meta.json").exists() else "vortex_street")
+    cfg = compose_config(
+        ["+experiment=teacher", f"flow={flow_name}", "logger=csv", "logger.progress=false", *args.override]
+    )
+    from torchrl.collectors import Collector
+
+    from flownav.algorithms.ppo import make_actor_critic
+    from flownav.builders import build_env, build_flow, build_task
+
+    flow = build_flow(cfg.flow)
+    task = build_task(cfg.task, flow)
+    B, T = int(cfg.env.num_envs), int(cfg.algo.rollout_steps)
+    env = build_env(cfg.env, flow, task, ["geo"], num_envs=B, seed=0)
+    low, high = env.action_spec.space.low[0], env.action_spec.space.high[0]
+    policy, actor, _, _ = make_actor_critic("geo", "geo", low, high, cfg.algo.actor, cfg.algo.critic)
+
+    # 1. TorchRL collection alone
+    collector = Collector(env, actor, frames_per_batch=B * T, total_frames=-1, trust_policy=True)
+    it = iter(collector)
+    next(it)
+    t = time.perf_counter()
+    for _ in range(args.iterations):
+        next(it)
+    torchrl_collect = args.iterations * B * T / (time.perf_counter() - t)
+    collector.shutdown()
+
+    # 2. plain-torch collection, same physics and MLP
+    plain_env = build_env(cfg.env, flow, task, ["geo"], num_envs=B, seed=0)
+    plain_collect(plain_env, policy, T)
+    plain = sum(plain_collect(plain_env, policy, T) for _ in range(args.iterations)) / args.iterations
+
+    # 3. end-to-end PPO (a short training run through train())
+    import tempfile
+
+    from flownav.algorithms.ppo import train
+
+    frames = (args.iterations + 1) * B * T
+    cfg_ppo = compose_config(
+        [
+            "+experiment=teacher",
+            f"flow={flow_name}",
+            "logger=csv",
+            "logger.progress=false",
+            f"algo.total_frames={frames}",
+            "algo.final_eval_episodes=0",
+            "checkpoint_every=1000",
+            *args.override,
+        ]
+    )
+    with tempfile.TemporaryDirectory() as tmp:
+        train(cfg_ppo, tmp)
+        rows = list(csv.DictReader(open(Path(tmp) / "metrics.csv", newline="")))
+    # steady state: skip the first iteration (warm-up)
+    dt_wall = float(rows[-1]["wall_time"]) - float(rows[0]["wall_time"])
+    e2e = (int(rows[-1]["step"]) - int(rows[0]["step"])) / dt_wall if dt_wall > 0 else math.nan
+
+    reached = minutes_to_target(args.run)
+    payload = {
+        "headline": {
+            "agent_steps_per_s": round(e2e, 1),
+            "minutes_to_90pct": None if reached is None else round(reached[0], 2),
+            "torchrl_collect_steps_per_s": round(torchrl_collect, 1),
+            "plain_collect_steps_per_s": round(plain, 1),
+            "torchrl_over_plain": round(torchrl_collect / plain, 3),
+            "target_minutes_to_90pct": 30,
+        },
+        "minutes_to_90pct_source": None
+        if reached is None
+        else {"run": reached[1], "step": reached[2], "metric": "train/success_rate >= 0.9 (training episodes)"},
+        "flow": flow_name,
+        "num_envs": B,
+        "rollout_steps": T,
+        "iterations": args.iterations,
+        "actor_hidden": list(cfg.algo.actor.hidden),
+        "command": "python benchmarks/train_throughput.py " + " ".join(sys.argv[1:]),
+        "machine": machine(),
+        "note": "2 shared cores: other processes (a CFD run) compete; see machine.load_average_1min.",
+    }
+    write_result("train_throughput", payload)
+
+
+if __name__ == "__main__":
+    main()

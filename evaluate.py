@@ -1,0 +1,136 @@
+"""Evaluate navigation policies: one checkpoint on any flow and task, or every experiment of the paper.
+
+    python evaluate.py checkpoint=checkpoints/student.pt                          # training flow, 10,000 episodes
+    python evaluate.py checkpoint=checkpoints/teacher.pt env.misalignment_deg=90  # a misaligned wake
+    python evaluate.py checkpoint=checkpoints/student.pt flow=abc task=abc env.swim_speed_scale=0.1
+    python evaluate.py +experiment=paper                 # the whole paper -> REPORT.md, results/paper.json
+    python evaluate.py +experiment=paper_misalignment    # one experiment (merged into the report)
+    python evaluate.py +experiment=paper flow=vortex_street max_episodes=500      # a quick dry run
+
+Episodes are deterministic (the policy's mean action) and counted exactly: one per env slot, no
+auto-reset. See docs/evaluation.md.
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+import sys
+import time
+from pathlib import Path
+
+import hydra
+import torch
+from omegaconf import DictConfig, OmegaConf
+
+from flownav.builders import ConfigError, build_env, build_flow, build_task
+from flownav.checkpoint import load_policy
+from flownav.evaluation.metrics import summarize
+from flownav.evaluation.rollout import run_episodes
+from flownav.paths import resolve
+
+EVAL_CONF = Path(__file__).resolve().parent / "conf" / "evaluate"
+
+
+def command_line() -> str:
+    args = [a for a in sys.argv[1:] if not a.startswith("hydra.searchpath")]
+    return "python evaluate.py " + " ".join(shlex.quote(a) for a in args)
+
+
+def evaluate_checkpoint(cfg: DictConfig, log=print) -> dict:
+    """Evaluate ``cfg.checkpoint`` on ``cfg.flow`` / ``cfg.task`` / ``cfg.env`` for ``cfg.episodes`` episodes."""
+    policy, payload = load_policy(resolve(str(cfg.checkpoint)), expect_obs=cfg.get("expect_obs"), device=cfg.device)
+    obs = payload["obs"]
+    flow = build_flow(cfg.flow, device=cfg.device)
+    task = build_task(cfg.task, flow)
+
+    def make_env(n, chunk):
+        return build_env(
+            cfg.env, flow, task, [obs], num_envs=n, seed=int(cfg.seed) + 1_000_003 * chunk, device=cfg.device
+        )
+
+    t0 = time.time()
+    ep = run_episodes(policy, obs, make_env, int(cfg.episodes), int(cfg.chunk_size))
+    out = summarize(ep.status, ep.time)
+    out.update(
+        seconds=round(time.time() - t0, 2),
+        checkpoint=str(cfg.checkpoint),
+        obs=obs,
+        role=payload["role"],
+        command=command_line(),
+    )
+    lo, hi = out["success_ci95"]
+    f = out["failures"]
+    t = out["mean_success_time"]
+    log(
+        f"{cfg.checkpoint} ({payload['role']}, {obs}): success {100 * out['success_rate']:.2f}% "
+        f"[{100 * lo:.2f}, {100 * hi:.2f}] of {out['episodes']} episodes, mean success time "
+        f"{'-' if t is None else f'{t:.2f}'}; left domain {f['left_domain']['count']}, hit cylinder "
+        f"{f['hit_obstacle']['count']}, out of time {f['timeout']['count']} ({out['seconds']} s)"
+    )
+    if cfg.get("output"):
+        path = Path(str(cfg.output))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(out, indent=1))
+    return out
+
+
+def run_paper(cfg: DictConfig, log=print) -> dict:
+    """Run the suite, merge it into ``cfg.results`` and rewrite ``cfg.report``."""
+    from flownav.evaluation.experiments import run_suite
+    from flownav.evaluation.report import merge_results, provenance, write_report
+
+    cmd = command_line()
+    t0 = time.time()
+    results = run_suite(cfg, log=log)
+    data = merge_results(resolve(str(cfg.results)), results, provenance(cmd))
+    report = write_report(data, resolve(str(cfg.report)), cmd, seconds=time.time() - t0)
+    log(f"wrote {cfg.results} and {report} in {time.time() - t0:.1f} s")
+    return results
+
+
+def run(cfg: DictConfig, log=print) -> dict:
+    if cfg.threads:
+        torch.set_num_threads(int(cfg.threads))
+    unknown = set(cfg.keys()) - KNOWN_KEYS
+    if unknown:
+        raise ConfigError(
+            f"unknown top-level key(s) {sorted(unknown)} in the evaluate config; known: {sorted(KNOWN_KEYS)}"
+        )
+    if cfg.get("suite"):
+        return run_paper(cfg, log)
+    return evaluate_checkpoint(cfg, log)
+
+
+KNOWN_KEYS = {
+    "flow",
+    "task",
+    "env",
+    "checkpoint",
+    "expect_obs",
+    "episodes",
+    "output",
+    "chunk_size",
+    "seed",
+    "threads",
+    "device",
+    "max_episodes",
+    "policies",
+    "suite",
+    "results",
+    "report",
+    "figures_dir",
+}
+
+
+@hydra.main(version_base="1.3", config_path="conf", config_name="evaluate")
+def main(cfg: DictConfig) -> None:
+    OmegaConf.set_readonly(cfg, False)
+    run(cfg)
+
+
+if __name__ == "__main__":
+    # The suite's configs live in conf/evaluate/experiment; make that findable from any working directory.
+    if not any(a.startswith("hydra.searchpath") for a in sys.argv[1:]):
+        sys.argv.append(f"hydra.searchpath=[file://{EVAL_CONF}]")
+    main()

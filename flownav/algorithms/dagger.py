@@ -1,0 +1,308 @@
+"""DAgger: an ego student imitates a geo teacher (paper section 2.3.3, eq. 9).
+
+One iteration, read top to bottom in :func:`train`:
+
+1. **Collect.** ``num_envs`` swimmers start fresh episodes and run ``steps_per_iteration`` steps
+   (finished episodes restart in place). At each step the env emits the student's view (``ego``) and
+   the teacher's view (``geo``) of the *same* state; the teacher labels the state with its
+   deterministic action; the swimmer executes the student's action, or the teacher's with probability
+   ``beta_i = beta.initial * beta.decay ** i`` (per swimmer and step). The paper lets the student act
+   alone: ``beta.initial = 0``.
+2. **Aggregate.** The (student observation, teacher action) pairs go into a TorchRL replay buffer
+   (``LazyTensorStorage``, FIFO beyond ``buffer_capacity``).
+3. **Normalise.** The student's observation normaliser is set to the mean and variance of the
+   aggregated observations.
+4. **Fit.** ``updates_per_iteration`` Adam steps on minibatches sampled uniformly from the buffer,
+   minimising eq. 9: ``L = 1/N sum_i sum_j (a_hat_ij - a*_ij)^2`` (actions in their physical units).
+
+Logged per iteration (``metrics.csv``, wandb): ``train/loss`` (eq. 9, mean over the iteration's
+updates), ``train/loss_onpolicy`` (eq. 9 of the student on the states it just visited, before fitting:
+the error DAgger exists to drive down), the success rate of the episodes that ended during collection,
+beta, buffer size. Checkpoints (``<run>/checkpoints/last.pt``, atomic) carry the optimiser, RNG state,
+counters; the aggregated data is saved next to it (``buffer.pt``, atomic), so ``resume=<run dir>``
+continues exactly where the run stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import time
+from pathlib import Path
+
+import torch
+from omegaconf import OmegaConf
+from tensordict import TensorDict
+from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+from torchrl.data.replay_buffers.samplers import RandomSampler
+
+from flownav.agents.networks import DeterministicPolicy
+from flownav.builders import ConfigError, build_env, build_flow, build_task
+from flownav.checkpoint import atomic_torch_save, load_checkpoint, load_policy, save_policy_checkpoint
+from flownav.envs.navigation import Status
+from flownav.envs.observations import observation_size
+from flownav.paths import resolve
+
+STUDENT_VIEWS = ("ego", "ego_flow", "geo", "geo_flow")
+
+
+def imitation_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Eq. 9: squared error summed over the action's components, averaged over the batch."""
+    return ((pred - target) ** 2).sum(-1).mean()
+
+
+def check_config(cfg) -> None:
+    a = cfg.algo
+    if not cfg.get("teacher_checkpoint"):
+        raise ConfigError("DAgger needs a teacher: set teacher_checkpoint=<path> (python train.py +experiment=teacher)")
+    for key in (
+        "iterations",
+        "num_envs",
+        "steps_per_iteration",
+        "buffer_capacity",
+        "batch_size",
+        "updates_per_iteration",
+    ):
+        if int(a[key]) < 1:
+            raise ConfigError(f"algo.{key} must be >= 1, got {a[key]}")
+    if not 0.0 <= float(a.beta.initial) <= 1.0 or not 0.0 <= float(a.beta.decay) <= 1.0:
+        raise ConfigError(f"algo.beta.initial and algo.beta.decay must lie in [0, 1], got {a.beta}")
+    if not float(a.lr) > 0:
+        raise ConfigError(f"algo.lr must be > 0, got {a.lr}")
+    if str(cfg.obs.view) not in STUDENT_VIEWS:
+        raise ConfigError(f"obs.view (the student's view) is {cfg.obs.view!r}; choose one of {STUDENT_VIEWS}")
+
+
+def beta_at(a, iteration: int) -> float:
+    return float(a.beta.initial) * float(a.beta.decay) ** iteration
+
+
+def set_normalizer_from(policy: DeterministicPolicy, obs: torch.Tensor) -> None:
+    """Normaliser statistics = mean and variance of all aggregated observations."""
+    norm = policy.normalizer
+    norm.mean.copy_(obs.mean(0))
+    norm.var.copy_(obs.var(0, unbiased=False))
+    norm.count.fill_(obs.shape[0])
+
+
+def _find_resume(resume) -> Path:
+    path = Path(str(resume)).expanduser()
+    if path.is_dir():
+        for c in (path / "checkpoints" / "last.pt", path / "last.pt"):
+            if c.is_file():
+                return c
+        raise ConfigError(f"resume={resume}: no checkpoints/last.pt in that run directory")
+    if not path.is_file():
+        raise ConfigError(f"resume={resume}: no such run directory or checkpoint file")
+    return path
+
+
+@torch.no_grad()
+def collect(env, student, teacher, student_view, teacher_view, steps, beta, gen) -> tuple[TensorDict, dict]:
+    """Run ``steps`` steps from fresh episodes; return the labelled states and episode statistics."""
+    td = env.reset()
+    obs, labels = [], []
+    ended = succeeded = 0
+    success_time = 0.0
+    for _ in range(steps):
+        s_obs = td[student_view]
+        a_student = student(s_obs)
+        a_teacher = teacher(td[teacher_view])
+        obs.append(s_obs)
+        labels.append(a_teacher)
+        if beta > 0:
+            use_teacher = torch.rand(a_student.shape[0], 1, generator=gen) < beta
+            td["action"] = torch.where(use_teacher, a_teacher, a_student)
+        else:
+            td["action"] = a_student
+        out, td = env.step_and_maybe_reset(td)
+        done = out["next", "done"].reshape(-1)
+        if done.any():
+            status = out["next", "status"].reshape(-1)[done]
+            win = status == Status.SUCCESS
+            ended += int(done.sum())
+            succeeded += int(win.sum())
+            success_time += float(out["next", "time"].reshape(-1)[done][win].sum())
+    data = TensorDict({"obs": torch.cat(obs), "teacher_action": torch.cat(labels)}, batch_size=[len(obs) * len(obs[0])])
+    stats = {
+        "episodes": ended,
+        "success_rate": succeeded / ended if ended else math.nan,
+        "mean_success_time": success_time / succeeded if succeeded else math.nan,
+    }
+    return data, stats
+
+
+def train(cfg, run_dir) -> dict:
+    run_dir = Path(run_dir)
+    check_config(cfg)
+    a = cfg.algo
+    # ---- config pulled into locals before the hot loop
+    seed = int(cfg.seed)
+    student_view, teacher_view = str(cfg.obs.view), str(a.teacher_view)
+    iterations, steps = int(a.iterations), int(a.steps_per_iteration)
+    updates, batch_size = int(a.updates_per_iteration), int(a.batch_size)
+    checkpoint_every = int(cfg.checkpoint_every) if cfg.get("checkpoint_every") else 0
+    role = str(cfg.get("role") or "student")
+    device = str(cfg.device)
+    torch.manual_seed(seed)
+
+    teacher, teacher_payload = load_policy(resolve(str(cfg.teacher_checkpoint)), expect_obs=teacher_view, device=device)
+    flow = build_flow(cfg.flow, device=device)
+    task = build_task(cfg.task, flow)
+    env = build_env(
+        cfg.env, flow, task, [student_view, teacher_view], num_envs=int(a.num_envs), seed=seed, device=device
+    )
+    low, high = env.action_spec.space.low[0].tolist(), env.action_spec.space.high[0].tolist()
+    t_cfg = teacher_payload["policy"]["config"]
+    if [round(v, 6) for v in t_cfg["action_high"]] != [round(v, 6) for v in high]:
+        raise ConfigError(
+            f"the teacher's action box {t_cfg['action_low']}..{t_cfg['action_high']} differs from the env's "
+            f"{low}..{high}: train the student with the teacher's env settings (env.u_max)"
+        )
+    student = DeterministicPolicy(
+        observation_size(student_view), low, high, hidden=list(a.hidden), activation=str(a.activation)
+    ).to(device)
+    optim = torch.optim.Adam(student.parameters(), lr=float(a.lr), weight_decay=float(a.weight_decay))
+    buffer = TensorDictReplayBuffer(
+        storage=LazyTensorStorage(int(a.buffer_capacity), device=device),
+        sampler=RandomSampler(),
+        batch_size=batch_size,
+    )
+    gen = torch.Generator().manual_seed(seed + 1)  # beta mixing
+
+    ckpt_dir = run_dir / "checkpoints"
+    iteration, frames, wall_offset, history = 0, 0, 0.0, []
+    if cfg.get("resume"):
+        path = _find_resume(cfg.resume)
+        payload = load_checkpoint(path)
+        if payload["obs"] != student_view:
+            raise ConfigError(
+                f"resume={cfg.resume}: that run trained a student on {payload['obs']!r} but this config asks for "
+                f"{student_view!r}; resume with obs={payload['obs']}"
+            )
+        st = payload["train_state"]
+        student.load_state_dict(payload["policy"]["state_dict"])
+        optim.load_state_dict(st["optimizer"])
+        buf_path = path.parent / st["buffer_file"]
+        if not buf_path.is_file():
+            raise ConfigError(f"resume={cfg.resume}: {buf_path} (the aggregated data) is missing")
+        buffer.load_state_dict(torch.load(buf_path, weights_only=False))
+        iteration, frames, wall_offset = int(st["iteration"]), int(st["frames"]), float(st["wall_time"])
+        history = list(st.get("history", []))
+        torch.set_rng_state(st["rng"]["torch"])
+        env.rng.set_state(st["rng"]["env"])
+        gen.set_state(st["rng"]["beta"])
+
+    from flownav.runlog import RunLogger
+
+    logger = RunLogger(run_dir, cfg, total=iterations, start=iteration, wall_offset=wall_offset)
+
+    def save(name: str, metrics: dict) -> Path:
+        atomic_torch_save(buffer.state_dict(), ckpt_dir / "buffer.pt")
+        train_state = {
+            "iteration": iteration,
+            "frames": frames,
+            "wall_time": logger.elapsed,
+            "optimizer": optim.state_dict(),
+            "rng": {"torch": torch.get_rng_state(), "env": env.rng.get_state(), "beta": gen.get_state()},
+            "buffer_file": "buffer.pt",
+            "history": history,
+        }
+        meta = {
+            "config": OmegaConf.to_container(cfg, resolve=True),
+            "iteration": iteration,
+            "frames": frames,
+            "teacher_checkpoint": str(cfg.teacher_checkpoint),
+            "metrics": metrics,
+        }
+        return save_policy_checkpoint(ckpt_dir / name, student, student_view, role, meta=meta, train_state=train_state)
+
+    metrics: dict = dict(history[-1]) if history else {}
+    while iteration < iterations:
+        t0 = time.time()
+        beta = beta_at(a, iteration)
+        # 1. collect with the current student (mixed with the teacher by beta)
+        student.eval()
+        data, ep = collect(env, student, teacher, student_view, teacher_view, steps, beta, gen)
+        with torch.no_grad():
+            loss_onpolicy = float(imitation_loss(student(data["obs"]), data["teacher_action"]))
+        t_collect = time.time() - t0
+        # 2. aggregate, 3. normalise
+        buffer.extend(data)
+        frames += data.shape[0]
+        stored = buffer[:]
+        set_normalizer_from(student, stored["obs"])
+        # 4. fit eq. 9
+        student.train()
+        total = 0.0
+        for _ in range(updates):
+            batch = buffer.sample()
+            loss = imitation_loss(student(batch["obs"]), batch["teacher_action"])
+            optim.zero_grad(set_to_none=True)
+            loss.backward()
+            if a.grad_clip:
+                torch.nn.utils.clip_grad_norm_(student.parameters(), float(a.grad_clip))
+            optim.step()
+            total += float(loss.detach())
+        iteration += 1
+        metrics = {
+            "iteration": iteration,
+            "train/loss": total / updates,
+            "train/loss_onpolicy": loss_onpolicy,
+            "train/success_rate": ep["success_rate"],
+            "train/mean_success_time": ep["mean_success_time"],
+            "train/episodes": ep["episodes"],
+            "train/beta": beta,
+            "buffer/size": len(buffer),
+            "perf/collect_s": t_collect,
+            "perf/iteration_s": time.time() - t0,
+        }
+        history.append({k: v for k, v in metrics.items()})
+        logger.log(iteration, metrics)
+        if checkpoint_every and iteration % checkpoint_every == 0:
+            save("last.pt", metrics)
+    save("last.pt", metrics)
+    final = {"iterations": iteration, "frames": frames, "wall_time_s": logger.elapsed}
+    final.update({k: v for k, v in metrics.items() if isinstance(v, int | float)})
+
+    eval_episodes = int(a.get("final_eval_episodes", 0) or 0)
+    if eval_episodes > 0:
+        from flownav.evaluation.metrics import summarize
+        from flownav.evaluation.rollout import run_episodes
+
+        student.eval()
+        for name, pol, view in (("student", student, student_view), ("teacher", teacher, teacher_view)):
+
+            def make_env(n, chunk, view=view):
+                return build_env(cfg.env, flow, task, [view], num_envs=n, seed=10_000_019 + seed + chunk, device=device)
+
+            ep = run_episodes(pol, view, make_env, eval_episodes, chunk_size=10_000)
+            s = summarize(ep.status, ep.time)
+            final[f"eval/{name}_success_rate"] = s["success_rate"]
+            final[f"eval/{name}_mean_success_time"] = s["mean_success_time"]
+        logger.log(iteration, {k: v for k, v in final.items() if k.startswith("eval/") and v is not None})
+    logger.summary(final)
+    logger.close()
+    if a.get("results_json"):
+        path = resolve(str(a.results_json))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        curve = [
+            {k: h[k] for k in ("iteration", "train/loss", "train/loss_onpolicy", "train/success_rate")} for h in history
+        ]
+        record = {
+            "run_dir": str(run_dir),
+            "teacher_checkpoint": str(cfg.teacher_checkpoint),
+            "seed": seed,
+            "final": final,
+            "curve": curve,
+        }
+        path.write_text(json.dumps(record, indent=1, default=str))
+    if cfg.get("output_checkpoint"):
+        out = resolve(str(cfg.output_checkpoint))
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_name(out.name + ".tmp")
+        shutil.copyfile(ckpt_dir / "last.pt", tmp)
+        tmp.replace(out)
+        final["output_checkpoint"] = str(out)
+    return final

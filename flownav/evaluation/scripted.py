@@ -1,0 +1,93 @@
+"""A scripted geo expert ("turn towards the target, swim at full speed") and a way to turn any expert into a
+checkpointable :class:`~flownav.agents.DeterministicPolicy` by regression. Used by tests and benchmarks as a
+stand-in teacher; it is no navigator for the wake (it ignores the flow)."""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor, nn
+
+from flownav.agents.networks import DeterministicPolicy
+from flownav.envs.kinematics import wrap_angle
+from flownav.envs.navigation import DPSI_MAX, DTHETA_MAX
+
+ACTION_LOW = (0.0, -DTHETA_MAX, -DPSI_MAX)
+
+
+def action_high(u_max: float = 1.0) -> tuple[float, float, float]:
+    return (float(u_max), DTHETA_MAX, DPSI_MAX)
+
+
+class HeadToTarget(nn.Module):
+    """Geo observation (to_target, velocity, theta, psi) -> (speed, turn rates towards the target).
+
+    Speed: u_max times the cosine between heading and target direction (at least 5%)."""
+
+    def __init__(self, u_max: float = 1.0, speed_fraction: float = 0.98):
+        super().__init__()
+        self.u_max, self.speed_fraction = float(u_max), float(speed_fraction)
+
+    def forward(self, obs: Tensor) -> Tensor:
+        d = obs[..., :3]
+        theta, psi = obs[..., 6], obs[..., 7]
+        theta_d = torch.atan2(d[..., 1], d[..., 0])
+        psi_d = torch.asin((d[..., 2] / d.norm(dim=-1).clamp_min(1e-6)).clamp(-1, 1))
+        # f(e) = sin e + (1 - cos e) / 2 is continuous and 2 pi periodic in the heading error e: zero (stable)
+        # at e = 0, positive (turn left) when the target is behind, so a small network can fit it.
+        err = wrap_angle(theta_d - theta)
+        f = torch.sin(err) + 0.5 * (1 - torch.cos(err))
+        dtheta = DTHETA_MAX * 0.95 * torch.tanh(3 * f)
+        dpsi = DPSI_MAX * 0.95 * torch.tanh(3 * (psi_d - psi))
+        # Swim slowly while facing away (no orbiting the target); stay below the bounds so that a
+        # tanh-squashed network can match it without saturating.
+        heading = torch.stack(
+            (torch.cos(psi) * torch.cos(theta), torch.cos(psi) * torch.sin(theta), torch.sin(psi)), -1
+        )
+        facing = (heading * d).sum(-1) / d.norm(dim=-1).clamp_min(1e-6)
+        speed = self.u_max * self.speed_fraction * facing.clamp(0.05, 1.0)
+        return torch.stack((speed, dtheta, dpsi), -1)
+
+
+def random_geo_obs(n: int, generator: torch.Generator | None = None, scale: float = 12.0) -> Tensor:
+    """Geo observations with target distances log-uniform in [0.1, scale] (dense near the target)."""
+    direction = torch.randn(n, 3, generator=generator)
+    direction = direction / direction.norm(dim=-1, keepdim=True).clamp_min(1e-6)
+    radius = torch.exp(torch.empty(n, 1).uniform_(math.log(0.1), math.log(scale), generator=generator))
+    d = direction * radius
+    v = torch.randn(n, 3, generator=generator)
+    theta = (torch.rand(n, generator=generator) * 2 - 1) * math.pi
+    psi = (torch.rand(n, generator=generator) * 2 - 1) * (math.pi / 2) * 0.9
+    return torch.cat((d, v, theta[:, None], psi[:, None]), -1)
+
+
+def fit_expert(
+    expert: nn.Module,
+    obs_dim: int = 8,
+    hidden=(64, 64),
+    steps: int = 1500,
+    batch: int = 2048,
+    lr: float = 1e-2,
+    seed: int = 0,
+    u_max: float = 1.0,
+    sampler=random_geo_obs,
+) -> tuple[DeterministicPolicy, float]:
+    """Regress a DeterministicPolicy on ``expert`` over random observations; returns it and its final MSE."""
+    g = torch.Generator().manual_seed(seed)
+    torch.manual_seed(seed)
+    policy = DeterministicPolicy(obs_dim, ACTION_LOW, action_high(u_max), hidden=hidden, activation="tanh")
+    policy.normalizer.update(sampler(50_000, g))
+    opt = torch.optim.Adam(policy.parameters(), lr=lr)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, steps)
+    loss = torch.tensor(float("nan"))
+    for _ in range(steps):
+        x = sampler(batch, g)
+        with torch.no_grad():
+            y = expert(x)
+        loss = ((policy(x) - y) ** 2).sum(-1).mean()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+    return policy.eval(), float(loss.detach())

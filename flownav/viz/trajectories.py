@@ -1,0 +1,261 @@
+"""Trajectory figures (Figs. 3, 5a-d, 6a) and a movie of one episode.
+
+A trajectory is the ``trajectories`` dict of :func:`flownav.evaluation.rollout.run_episodes`:
+``position`` [k, T+1, 3], ``velocity`` [k, T+1, 3], ``heading`` [k, T+1, 2], ``alive`` [k, T+1],
+``time`` [T+1], ``target`` [k, 3], ``status`` [k], ``t0`` [k].
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+import torch
+
+from flownav.envs.kinematics import body_frame, to_body
+from flownav.envs.navigation import Status
+from flownav.flows.transforms import RotatedFlow
+from flownav.viz.fields import symmetric_levels, xy_slice
+
+COLORS = {"teacher": "tab:blue", "student": "tab:orange", "baseline": "tab:gray"}
+
+
+def _color(name: str, i: int = 0) -> str:
+    return COLORS.get(str(name).split("_")[0], f"C{i}")
+
+
+def _path(traj, i: int = 0) -> np.ndarray:
+    alive = traj["alive"][i].numpy()
+    return traj["position"][i].numpy()[alive]
+
+
+def _cylinder_3d(ax, flow, z0: float, z1: float) -> None:
+    for ob in getattr(flow, "obstacles", ()):
+        th = np.linspace(0, 2 * np.pi, 40)
+        zz = np.linspace(z0, z1, 2)
+        T, Z = np.meshgrid(th, zz)
+        ax.plot_surface(
+            ob.center[0] + ob.radius * np.cos(T),
+            ob.center[1] + ob.radius * np.sin(T),
+            Z,
+            color="0.5",
+            alpha=0.5,
+            linewidth=0,
+        )
+
+
+def plot_trajectories_3d(runs: dict, flow, out: Path, title: str = "") -> str:
+    """One episode per policy (same start and target), in 3D, over the z-vorticity of the start plane."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    b = flow.bounds
+    fig = plt.figure(figsize=(11, 4.8))
+    ax = fig.add_subplot(1, 2, 1, projection="3d")
+    ax2 = fig.add_subplot(1, 2, 2)
+    first = next(iter(runs.values()))
+    start = first["position"][0, 0].numpy()
+    target = first["target"][0].numpy()
+    X, Y, _, om = xy_slice(flow, float(start[2]), float(first["t0"][0]), (b.lo[0], b.hi[0], b.lo[1], b.hi[1]))
+    om, levels = symmetric_levels(om)
+    ax2.contourf(X, Y, om, levels=levels, cmap="RdBu_r")
+    for ob in getattr(flow, "obstacles", ()):
+        ax2.add_patch(plt.Circle(ob.center, ob.radius, color="0.3"))
+    _cylinder_3d(ax, flow, b.lo[2], b.hi[2])
+    for i, (name, traj) in enumerate(runs.items()):
+        p = _path(traj)
+        status = Status(int(traj["status"][0])).name.lower()
+        ax.plot(p[:, 0], p[:, 1], p[:, 2], color=_color(name, i), label=f"{name} ({status})")
+        ax2.plot(p[:, 0], p[:, 1], color=_color(name, i), lw=1.5)
+    for a in (ax, ax2):
+        a.plot(*([start[0]], [start[1]]) + (([start[2]],) if a is ax else ()), "o", color="k")
+        a.plot(*([target[0]], [target[1]]) + (([target[2]],) if a is ax else ()), "*", color="gold", ms=14, mec="k")
+    ax.set_xlim(b.lo[0], b.hi[0])
+    ax.set_ylim(b.lo[1], b.hi[1])
+    ax.set_zlim(b.lo[2], b.hi[2])
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+    ax.set_zlabel("z")
+    ax.legend(fontsize=7, loc="upper left")
+    ax2.set_aspect("equal")
+    ax2.set_title(f"x-y projection over z-vorticity at z = {start[2]:.1f}, t = 0", fontsize=9)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return str(out)
+
+
+def body_velocity(traj, i: int = 0) -> np.ndarray:
+    """Velocity in the body frame (the ego view's velocity) along one recorded trajectory."""
+    h = traj["heading"][i]
+    frame = body_frame(h[:, 0], h[:, 1])
+    return to_body(frame, traj["velocity"][i]).numpy()
+
+
+def plot_velocity_traces(runs: dict, out: Path) -> str:
+    """Fig. 3c: velocity of each policy's episode in the inertial frame (top) and the body frame (bottom)."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    names = list(runs)
+    fig, axes = plt.subplots(2, len(names), figsize=(4.2 * len(names), 5.2), squeeze=False, sharex="col")
+    for j, name in enumerate(names):
+        traj = runs[name]
+        alive = traj["alive"][0].numpy()
+        t = traj["time"].numpy()[alive]
+        ve = traj["velocity"][0].numpy()[alive]
+        vb = body_velocity(traj)[alive]
+        for c, comp in enumerate("xyz"):
+            axes[0][j].plot(t, ve[:, c], label=f"v_e,{comp}")
+            axes[1][j].plot(t, vb[:, c], label=f"v_b,{comp}")
+        axes[0][j].set_title(f"{name} ({Status(int(traj['status'][0])).name.lower()})")
+        for r in range(2):
+            axes[r][j].axhline(0, color="k", lw=0.5)
+            axes[r][j].grid(alpha=0.3)
+            axes[r][j].legend(fontsize=7)
+        axes[1][j].set_xlabel("t")
+    axes[0][0].set_ylabel("inertial (geo) velocity")
+    axes[1][0].set_ylabel("body-frame (ego) velocity")
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return str(out)
+
+
+def _rotated_box(flow):
+    b = flow.bounds
+    corners = torch.tensor(
+        [
+            [b.lo[0], b.lo[1], 0],
+            [b.hi[0], b.lo[1], 0],
+            [b.hi[0], b.hi[1], 0],
+            [b.lo[0], b.hi[1], 0],
+            [b.lo[0], b.lo[1], 0],
+        ],
+        dtype=torch.float32,
+    )
+    return corners
+
+
+def plot_misaligned(runs: dict, flow, out: Path) -> str:
+    """Figs. 5a-d: x-y trajectories of each policy (rows) at each misalignment angle (columns).
+
+    Solid: success; dashed: failure. The rotated domain and cylinder are drawn in the inertial frame."""
+    from flownav.flows.transforms import rotate_z
+
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    pols = list(dict.fromkeys(k[0] for k in runs))
+    angles = list(dict.fromkeys(k[1] for k in runs))
+    fig, axes = plt.subplots(len(pols), len(angles), figsize=(3.2 * len(angles), 3.0 * len(pols)), squeeze=False)
+    box = _rotated_box(flow)
+    for r, pol in enumerate(pols):
+        for c, angle in enumerate(angles):
+            ax = axes[r][c]
+            traj = runs[(pol, angle)]
+            rb = rotate_z(box, math.radians(angle), (0.0, 0.0)).numpy()
+            ax.plot(rb[:, 0], rb[:, 1], color="0.6", lw=0.8)
+            for ob in getattr(flow, "obstacles", ()):
+                cen = rotate_z(torch.tensor([[*ob.center, 0.0]]), math.radians(angle), (0.0, 0.0))[0]
+                ax.add_patch(plt.Circle((float(cen[0]), float(cen[1])), ob.radius, color="0.3"))
+            wins = 0
+            for i in range(traj["position"].shape[0]):
+                p = _path(traj, i)
+                ok = int(traj["status"][i]) == Status.SUCCESS
+                wins += ok
+                ax.plot(p[:, 0], p[:, 1], "-" if ok else "--", color=f"C{i}", lw=1.2)
+                ax.plot(p[0, 0], p[0, 1], "o", color=f"C{i}", ms=3)
+                tg = traj["target"][i].numpy()
+                ax.plot(tg[0], tg[1], "*", color=f"C{i}", ms=9, mec="k")
+            ax.set_aspect("equal")
+            ax.set_title(f"{pol}, {angle:g} deg: {wins}/{traj['position'].shape[0]}", fontsize=9)
+            ax.tick_params(labelsize=6)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return str(out)
+
+
+def plot_abc(runs: dict, flow, out: Path) -> str:
+    """Fig. 6a: episodes of each policy in the ABC flow (x-y and x-z projections over the speed)."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    b = flow.bounds
+    pols = list(runs)
+    fig, axes = plt.subplots(len(pols), 2, figsize=(11, 2.9 * len(pols)), squeeze=False)
+    first = next(iter(runs.values()))
+    z = float(first["position"][0, 0, 2])
+    X, Y, speed, _ = xy_slice(flow, z, float(first["t0"][0]), (b.lo[0], b.hi[0], b.lo[1], b.hi[1]))
+    for r, pol in enumerate(pols):
+        traj = runs[pol]
+        ax, axz = axes[r]
+        ax.contourf(X, Y, speed, levels=20, cmap="Greys", alpha=0.6)
+        wins = 0
+        for i in range(traj["position"].shape[0]):
+            p = _path(traj, i)
+            ok = int(traj["status"][i]) == Status.SUCCESS
+            wins += ok
+            for a, (u, v) in ((ax, (0, 1)), (axz, (0, 2))):
+                a.plot(p[:, u], p[:, v], "-" if ok else "--", color=f"C{i}", lw=1.2)
+                a.plot(p[0, u], p[0, v], "o", color=f"C{i}", ms=3)
+                tg = traj["target"][i].numpy()
+                a.plot(tg[u], tg[v], "*", color=f"C{i}", ms=9, mec="k")
+        ax.set_title(f"{pol}: {wins}/{traj['position'].shape[0]} reached (x-y, speed at z={z:.2f})", fontsize=9)
+        axz.set_title(f"{pol} (x-z)", fontsize=9)
+        ax.set_xlim(b.lo[0], b.hi[0])
+        ax.set_ylim(b.lo[1], b.hi[1])
+        axz.set_xlim(b.lo[0], b.hi[0])
+        axz.set_ylim(b.lo[2], b.hi[2])
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return str(out)
+
+
+def make_movie(traj, flow, out: Path, title: str = "", frames: int = 60, fps: int = 10) -> str:
+    """A gif of one episode: x-y position over the z-vorticity at the swimmer's height and flow time."""
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    b = flow.bounds
+    p = _path(traj)
+    t = traj["time"].numpy()[traj["alive"][0].numpy()]
+    t0 = float(traj["t0"][0])
+    idx = np.unique(np.linspace(0, len(p) - 1, min(frames, len(p))).round().astype(int))
+    extent = (b.lo[0], b.hi[0], b.lo[1], b.hi[1])
+    fig, ax = plt.subplots(figsize=(7, 4.4))
+    tg = traj["target"][0].numpy()
+
+    def draw(j):
+        ax.clear()
+        i = idx[j]
+        X, Y, _, om = xy_slice(flow, float(p[i, 2]), t0 + float(t[i]), extent, n=(120, 72))
+        om, levels = symmetric_levels(om, 21)
+        ax.contourf(X, Y, om, levels=levels, cmap="RdBu_r")
+        for ob in getattr(flow, "obstacles", ()):
+            ax.add_patch(plt.Circle(ob.center, ob.radius, color="0.3"))
+        ax.plot(p[: i + 1, 0], p[: i + 1, 1], color="k", lw=1.5)
+        ax.plot(p[i, 0], p[i, 1], "o", color="tab:orange", ms=7, mec="k")
+        ax.plot(tg[0], tg[1], "*", color="gold", ms=14, mec="k")
+        ax.set_xlim(extent[0], extent[1])
+        ax.set_ylim(extent[2], extent[3])
+        ax.set_aspect("equal")
+        ax.set_title(f"{title}  t = {t[i]:.1f}, z = {p[i, 2]:.2f}", fontsize=9)
+
+    anim = FuncAnimation(fig, draw, frames=len(idx))
+    anim.save(out, writer=PillowWriter(fps=fps))
+    plt.close(fig)
+    return str(out)
+
+
+__all__ = [
+    "RotatedFlow",
+    "body_velocity",
+    "make_movie",
+    "plot_abc",
+    "plot_misaligned",
+    "plot_trajectories_3d",
+    "plot_velocity_traces",
+]

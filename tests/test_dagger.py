@@ -1,0 +1,140 @@
+"""DAgger: on a tiny problem the imitation loss falls and the ego student matches its geo teacher; runs resume
+exactly; the student's normaliser is the aggregated data's; a teacher of the wrong view is refused."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+
+from flownav.algorithms.dagger import beta_at, imitation_loss
+from flownav.checkpoint import CheckpointError, load_checkpoint, load_policy, save_policy_checkpoint
+from flownav.evaluation.scripted import HeadToTarget, fit_expert
+
+ROOT = Path(__file__).resolve().parents[1]
+CONF = str(ROOT / "conf")
+
+# A weak uniform stream, targets 2-3 D away: the scripted teacher succeeds, the student can learn it in seconds.
+TINY = [
+    "flow=uniform",
+    "flow.velocity=[0.1,0.0,0.0]",
+    "task.start=[[5.0,0.0,5.0],[6.0,1.0,6.0]]",
+    "task.target=[[7.0,0.0,5.0],[8.0,1.0,6.0]]",
+    "env.time_limit=20.0",
+    "algo.num_envs=64",
+    "algo.steps_per_iteration=60",
+    "algo.updates_per_iteration=150",
+    "algo.batch_size=512",
+    "algo.hidden=[64,64]",
+    "algo.lr=3e-3",
+    "algo.final_eval_episodes=300",
+    "logger=csv",
+    "logger.progress=false",
+    "threads=1",
+    "output_checkpoint=null",
+    "algo.results_json=null",
+]
+
+
+@pytest.fixture(scope="module")
+def teacher_ckpt(tmp_path_factory):
+    """The scripted "turn to the target, swim" expert, fitted into a geo DeterministicPolicy checkpoint."""
+    policy, mse = fit_expert(HeadToTarget(), hidden=(64, 64), steps=600, batch=1024, seed=0)
+    assert mse < 0.3
+    path = tmp_path_factory.mktemp("teacher") / "teacher.pt"
+    save_policy_checkpoint(path, policy, "geo", "teacher")
+    return path
+
+
+def make_cfg(teacher, *overrides):
+    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
+        return compose("config", overrides=["+experiment=student", *TINY, f"teacher_checkpoint={teacher}", *overrides])
+
+
+def rows(run_dir):
+    with open(Path(run_dir) / "metrics.csv", newline="") as f:
+        return [r for r in csv.DictReader(f) if r.get("train/loss")]
+
+
+def test_student_experiment_config():
+    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
+        cfg = compose("config", overrides=["+experiment=student"])
+    assert cfg.algo.name == "dagger" and cfg.obs.view == "ego" and cfg.algo.teacher_view == "geo"
+    assert cfg.teacher_checkpoint == "checkpoints/teacher.pt" and cfg.output_checkpoint == "checkpoints/student.pt"
+    assert cfg.algo.beta.initial == 0.0  # the paper: the student acts alone
+    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
+        flow = compose("config", overrides=["+experiment=student_flowobs"])
+        sym = compose("config", overrides=["+experiment=student_symmetric"])
+    assert flow.obs.view == "ego_flow" and flow.algo.teacher_view == "geo_flow"
+    assert sym.task.type == "symmetric" and sym.teacher_checkpoint == "checkpoints/teacher_symmetric.pt"
+
+
+def test_beta_schedule_and_loss():
+    class A:
+        class beta:
+            initial, decay = 1.0, 0.5
+
+    assert [beta_at(A, i) for i in range(3)] == [1.0, 0.5, 0.25]
+    pred, target = torch.zeros(4, 3), torch.ones(4, 3)
+    assert float(imitation_loss(pred, target)) == pytest.approx(3.0)  # eq. 9 sums over the 3 action components
+
+
+def test_dagger_learns_the_teacher(teacher_ckpt, tmp_path):
+    import train
+
+    out = tmp_path / "student.pt"
+    final = train.run(
+        make_cfg(teacher_ckpt, "algo.iterations=5", f"output_checkpoint={out}", f"algo.results_json={tmp_path}/r.json"),
+        tmp_path / "run",
+    )
+    assert json.loads((tmp_path / "r.json").read_text())["curve"][-1]["iteration"] == 5
+    losses = [float(r["train/loss"]) for r in rows(tmp_path / "run")]
+    onpolicy = [float(r["train/loss_onpolicy"]) for r in rows(tmp_path / "run")]
+    assert losses[-1] < 0.6 * losses[0] and onpolicy[-1] < 0.7 * max(onpolicy[:2])
+    assert final["eval/teacher_success_rate"] > 0.9
+    assert final["eval/student_success_rate"] >= final["eval/teacher_success_rate"] - 0.1
+    policy, payload = load_policy(out, expect_obs="ego")
+    assert payload["role"] == "student" and policy.config["n_outputs"] == 3
+    # The normaliser holds the statistics of all aggregated observations.
+    buf = torch.load(tmp_path / "run" / "checkpoints" / "buffer.pt", weights_only=False)
+    obs = buf["_storage"]["_storage"]["obs"][: buf["_storage"]["_len"]]
+    assert torch.allclose(policy.normalizer.mean, obs.mean(0), atol=1e-4)
+    assert torch.allclose(policy.normalizer.var, obs.var(0, unbiased=False), rtol=1e-3)
+
+
+def test_resume_continues_exactly(teacher_ckpt, tmp_path):
+    import train
+
+    quick = [
+        "algo.updates_per_iteration=10",
+        "algo.steps_per_iteration=20",
+        "algo.final_eval_episodes=0",
+        "checkpoint_every=1",
+    ]
+    train.run(make_cfg(teacher_ckpt, *quick, "algo.iterations=3"), tmp_path / "straight")
+    train.run(make_cfg(teacher_ckpt, *quick, "algo.iterations=2"), tmp_path / "part")
+    train.run(make_cfg(teacher_ckpt, *quick, "algo.iterations=3", f"resume={tmp_path / 'part'}"), tmp_path / "x")
+    a, b = rows(tmp_path / "straight"), rows(tmp_path / "part")
+    assert len(b) == 3
+    for ra, rb in zip(a, b, strict=True):
+        assert float(ra["train/loss"]) == pytest.approx(float(rb["train/loss"]), rel=1e-6)
+    pa = load_checkpoint(tmp_path / "straight" / "checkpoints" / "last.pt")["policy"]["state_dict"]
+    pb = load_checkpoint(tmp_path / "part" / "checkpoints" / "last.pt")["policy"]["state_dict"]
+    assert all(torch.allclose(pa[k], pb[k]) for k in pa)
+
+
+def test_teacher_of_the_wrong_view_is_refused(tmp_path):
+    import train
+    from flownav.agents import DeterministicPolicy
+    from flownav.evaluation.scripted import ACTION_LOW, action_high
+
+    ego = tmp_path / "ego_teacher.pt"
+    save_policy_checkpoint(ego, DeterministicPolicy(6, ACTION_LOW, action_high(), hidden=(8,)), "ego", "baseline")
+    with pytest.raises(CheckpointError, match=r"reading 'ego'.*needs 'geo'"):
+        train.run(make_cfg(ego, "algo.iterations=1"), tmp_path / "run")
+    with pytest.raises(CheckpointError, match="no checkpoint"):
+        train.run(make_cfg(tmp_path / "nothing.pt", "algo.iterations=1"), tmp_path / "run2")

@@ -1,0 +1,367 @@
+"""Evaluation: exact episode counts, failure causes, Wilson intervals, subregion maps, the paper's suite at
+tiny size, and refusal of a checkpoint of the wrong observation view."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+
+from flownav.agents import DeterministicPolicy
+from flownav.checkpoint import CheckpointError, save_policy_checkpoint
+from flownav.envs import NavigationEnv, RegionTask, Status
+from flownav.evaluation.metrics import subregion_counts, summarize, wilson_interval
+from flownav.evaluation.rollout import run_episodes
+from flownav.evaluation.scripted import ACTION_LOW, HeadToTarget, action_high
+from flownav.flows import Box, Cylinder, FunctionFlow, UniformFlow, save_grid_flow
+from flownav.flows.base import WAKE_BOUNDS
+
+ROOT = Path(__file__).resolve().parents[1]
+CONF = str(ROOT / "conf")
+SEARCH = f"hydra.searchpath=[file://{ROOT / 'conf' / 'evaluate'}]"
+
+
+def env_factory(flow, task, views=("geo",), **kw):
+    kw = {"dt": 0.2, "time_limit": 20.0, "random_flow_phase": False} | kw
+
+    def make_env(n, chunk):
+        return NavigationEnv(flow, task, num_envs=n, views=views, seed=chunk, **kw)
+
+    return make_env
+
+
+def still(action):
+    """A policy that always returns the same action."""
+    a = torch.tensor(action)
+    return lambda obs: a.expand(obs.shape[0], 3).clone()
+
+
+# ----------------------------------------------------------------------------- Wilson
+@pytest.mark.parametrize("k,n", [(0, 10), (5, 10), (10, 10), (9469, 10000), (1, 3), (0, 10000)])
+def test_wilson_interval_solves_the_score_equation(k, n):
+    """The Wilson bounds are the roots p of (k/n - p)^2 = z^2 p (1 - p) / n: solve it independently."""
+    z = 1.959963984540054
+    ph = k / n
+    # (1 + z^2/n) p^2 - (2 ph + z^2/n) p + ph^2 = 0
+    qa, qb, qc = 1 + z * z / n, -(2 * ph + z * z / n), ph * ph
+    disc = math.sqrt(qb * qb - 4 * qa * qc)
+    lo, hi = wilson_interval(k, n)
+    assert lo == pytest.approx((-qb - disc) / (2 * qa), abs=1e-12)
+    assert hi == pytest.approx((-qb + disc) / (2 * qa), abs=1e-12)
+
+
+def test_wilson_interval_known_values():
+    assert wilson_interval(0, 10) == (0.0, pytest.approx(0.2775327998628899, abs=1e-12))
+    lo, hi = wilson_interval(5, 10)
+    assert (lo, hi) == (pytest.approx(0.2365930905, abs=1e-9), pytest.approx(0.7634069095, abs=1e-9))
+    assert wilson_interval(0, 0) == (0.0, 1.0)
+    with pytest.raises(ValueError):
+        wilson_interval(11, 10)
+
+
+# ----------------------------------------------------------------------------- exact counts, failure causes
+def test_exactly_n_episodes_and_pushed_out_of_the_domain():
+    """A uniform stream of 1.5 along +x carries motionless swimmers out through x = 16 at a known time."""
+    flow = UniformFlow((1.5, 0.0, 0.0))
+    ep = run_episodes(still([0.0, 0.0, 0.0]), "geo", env_factory(flow, RegionTask()), episodes=37, chunk_size=10)
+    assert len(ep) == 37 and ep.start.shape == (37, 3)
+    assert (ep.status == Status.LEFT_DOMAIN).all()
+    steps = torch.floor((16.0 - ep.start[:, 0]) / (1.5 * 0.2)) + 1  # first step with x > 16
+    assert torch.allclose(ep.time, steps * 0.2, atol=1e-4)
+    s = summarize(ep.status, ep.time)
+    assert s["episodes"] == 37 and s["successes"] == 0
+    assert s["failures"]["left_domain"]["count"] == 37 and s["failures"]["timeout"]["count"] == 0
+
+
+def test_short_episodes_are_not_over_counted():
+    """Half the swimmers leave fast, half time out: each slot still counts once (no auto-reset)."""
+    flow = FunctionFlow(
+        lambda p, t: torch.stack((torch.where(p[:, 1] > 3, 2.0, 0.0), 0 * p[:, 1], 0 * p[:, 2]), -1),
+        bounds=WAKE_BOUNDS,
+        max_speed=2.0,
+    )
+    task = RegionTask(Box((8.0, 2.0, 3.0), (12.0, 4.0, 7.0)), Box((8.0, -4.0, 3.0), (12.0, -2.0, 7.0)))
+    ep = run_episodes(still([0.0, 0.0, 0.0]), "geo", env_factory(flow, task, time_limit=6.0), episodes=500)
+    fast = ep.start[:, 1] > 3
+    assert len(ep) == 500
+    assert (ep.status[fast] == Status.LEFT_DOMAIN).all() and (ep.status[~fast] == Status.TIMEOUT).all()
+    s = summarize(ep.status, ep.time)
+    assert s["failures"]["left_domain"]["count"] == int(fast.sum())
+    assert s["failures"]["timeout"]["count"] == int((~fast).sum())
+    t_out = ep.time[~fast]
+    # All time out together, at the limit (the env accumulates time in float32: 30 x 0.2 = 5.9999986 < 6 - 1e-6,
+    # so it stops one step late at 6.2; reported to the env's owner).
+    assert (t_out == t_out[0]).all() and 6.0 - 1e-4 <= float(t_out[0]) <= 6.2 + 1e-4
+
+
+def test_hit_the_cylinder_and_success():
+    flow = FunctionFlow(
+        lambda p, t: torch.tensor([1.0, 0.0, 0.0]).expand_as(p).clone(),
+        bounds=WAKE_BOUNDS,
+        max_speed=1.0,
+        obstacles=[Cylinder((0.0, 0.0), 0.5)],
+    )
+    task = RegionTask(Box((-3.0, -0.2, 3.0), (-2.0, 0.2, 7.0)), Box((10.0, 4.0, 3.0), (12.0, 5.0, 7.0)))
+    ep = run_episodes(still([0.0, 0.0, 0.0]), "geo", env_factory(flow, task), episodes=50)
+    assert (ep.status == Status.HIT_OBSTACLE).all()
+    assert summarize(ep.status, ep.time)["failures"]["hit_obstacle"]["count"] == 50
+    # The scripted expert reaches targets 2-3 D away in still water.
+    calm = UniformFlow((0.0, 0.0, 0.0))
+    near = RegionTask(Box((5.0, 0.0, 5.0), (6.0, 1.0, 6.0)), Box((7.0, 0.0, 5.0), (8.0, 1.0, 6.0)))
+    ep = run_episodes(HeadToTarget(), "geo", env_factory(calm, near, time_limit=30.0), episodes=200, chunk_size=64)
+    s = summarize(ep.status, ep.time)
+    assert s["success_rate"] > 0.95 and s["mean_success_time"] > 0
+
+
+def test_rollout_is_deterministic_and_records_trajectories():
+    flow = UniformFlow((0.3, 0.0, 0.0))
+    make = env_factory(flow, RegionTask())
+    a = run_episodes(HeadToTarget(), "geo", make, episodes=40, chunk_size=16, record=3)
+    b = run_episodes(HeadToTarget(), "geo", make, episodes=40, chunk_size=16)
+    assert torch.equal(a.status, b.status) and torch.equal(a.time, b.time)
+    tr = a.trajectories
+    assert tr["position"].shape[0] == 3 and tr["position"].shape[1] == tr["time"].shape[0]
+    assert tr["action"].shape[1] == tr["position"].shape[1] - 1
+    for i in range(3):  # the recording ends where the episode ended
+        last = int(tr["alive"][i].nonzero().max())
+        assert tr["time"][last] == pytest.approx(float(a.time[i]), abs=1e-5)
+        assert torch.allclose(tr["position"][i, last], a.final_position[i])
+
+
+def test_subregion_counts():
+    box = Box((0.0, 0.0, 0.0), (10.0, 10.0, 10.0))
+    start = torch.tensor([[0.5, 0.5, 0.5], [0.6, 0.2, 0.9], [9.99, 9.99, 9.99], [10.0, 5.0, 0.0]])
+    success = torch.tensor([True, False, True, True])
+    n, k = subregion_counts(start, success, box, (10, 10, 10))
+    assert n.sum() == 4 and n[0, 0, 0] == 2 and k[0, 0, 0] == 1
+    assert n[9, 9, 9] == 1 and k[9, 9, 9] == 1 and n[9, 5, 0] == 1  # the upper face belongs to the last cell
+
+
+def test_ego_outcomes_do_not_depend_on_the_misalignment():
+    """Rotating the whole scene about z leaves every ego observation, hence an ego policy's outcome, unchanged."""
+    torch.manual_seed(0)
+    flow = FunctionFlow(
+        lambda p, t: torch.stack((0.6 + 0.3 * torch.sin(p[:, 1]), 0.3 * torch.cos(p[:, 0]), 0 * p[:, 2]), -1),
+        bounds=WAKE_BOUNDS,
+        max_speed=1.2,
+    )
+    ego = DeterministicPolicy(6, ACTION_LOW, action_high(), hidden=(16,))
+    out = {}
+    for angle in (0.0, 90.0):
+        ep = run_episodes(
+            ego, "ego", env_factory(flow, RegionTask(), views=("ego",), misalignment_deg=angle), episodes=300
+        )
+        out[angle] = ep.status
+    assert (out[0.0] == out[90.0]).float().mean() > 0.97
+
+
+# ----------------------------------------------------------------------------- evaluate.py and the suite
+@pytest.fixture(scope="module")
+def tiny_world(tmp_path_factory):
+    """A small grid wake dataset and throwaway checkpoints of every view."""
+    root = tmp_path_factory.mktemp("eval")
+    T, nx, ny, nz = 4, 21, 13, 6
+    lo, hi = WAKE_BOUNDS.lo, WAKE_BOUNDS.hi
+    x = np.linspace(lo[0], hi[0], nx)[None, :, None, None]
+    y = np.linspace(lo[1], hi[1], ny)[None, None, :, None]
+    t = np.arange(T)[:, None, None, None] / T * 2 * np.pi
+    u = 0.8 + 0.2 * np.sin(y + t) + 0 * x
+    v = 0.2 * np.sin(0.5 * x - t) + 0 * y
+    w = 0.05 * np.cos(x + t) + 0 * y
+    vel = np.stack(np.broadcast_arrays(u, v, w), -1) * np.ones((1, 1, 1, nz, 1))
+    data = save_grid_flow(
+        root / "wake",
+        vel.astype(np.float32),
+        origin=lo,
+        spacing=((hi[0] - lo[0]) / (nx - 1), (hi[1] - lo[1]) / (ny - 1), 2.0),
+        dt=1.0,
+        periodic=(False, False, True),
+        bounds=WAKE_BOUNDS,
+        obstacles=[Cylinder((0.0, 0.0), 0.5)],
+    )
+    torch.manual_seed(0)
+    ck = {}
+    for name, view, role in [
+        ("teacher", "geo", "teacher"),
+        ("student", "ego", "student"),
+        ("baseline", "ego", "baseline"),
+        ("teacher_symmetric", "geo", "teacher"),
+        ("student_symmetric", "ego", "student"),
+        ("teacher_flowobs", "geo_flow", "teacher"),
+        ("student_flowobs", "ego_flow", "student"),
+    ]:
+        pol = DeterministicPolicy(8 if view.startswith("geo") else 6, ACTION_LOW, action_high(), hidden=(16, 16))
+        ck[name] = save_policy_checkpoint(root / f"{name}.pt", pol, view, role)
+    return root, data, ck
+
+
+def compose_eval(*overrides):
+    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
+        return compose("evaluate", overrides=[SEARCH, *overrides])
+
+
+def tiny_overrides(root, data, ck):
+    return [
+        f"flow.path={data}",
+        "env.time_limit=3.0",
+        "max_episodes=24",
+        "chunk_size=16",
+        "threads=1",
+        f"results={root / 'paper.json'}",
+        f"report={root / 'REPORT.md'}",
+        f"figures_dir={root / 'figures'}",
+    ] + [f"policies.{k}.checkpoint={v}" for k, v in ck.items()]
+
+
+EXPERIMENTS = [
+    "training",
+    "extended",
+    "symmetric",
+    "flowobs",
+    "misalignment",
+    "abc",
+    "abc_ablation",
+    "figures",
+    "loss_curves",
+]
+
+
+@pytest.mark.parametrize("name", EXPERIMENTS)
+def test_each_experiment_composes_and_runs_tiny(tiny_world, name):
+    import evaluate
+
+    root, data, ck = tiny_world
+    extra = ["suite.figures.movie_frames=4"] if name == "figures" else []
+    if name == "loss_curves":
+        extra = [f"suite.loss_curves.run_globs=[{root}/runs/*/metrics.csv]", f"suite.loss_curves.json={root}/loss.json"]
+        run = root / "runs" / "s0"
+        run.mkdir(parents=True, exist_ok=True)
+        (run / "metrics.csv").write_text("step,iteration,train/loss\n1,1,0.8\n2,2,0.3\n3,3,0.15\n")
+    cfg = compose_eval(f"+experiment=paper_{name}", *tiny_overrides(root, data, ck), *extra)
+    results = evaluate.run(cfg, log=lambda *_: None)
+    r = results[name]
+    assert not r["missing"], r["missing"]
+    if name in ("training", "flowobs", "abc", "extended", "symmetric"):
+        for s in r["results"].values():
+            assert s["episodes"] == 24
+            assert s["successes"] + sum(f["count"] for f in s["failures"].values()) == 24
+    if name == "misalignment":
+        assert set(r["results"]["student"]) == {f"{a:g}" for a in range(0, 181, 15)}
+    if name in ("figures", "extended", "misalignment", "abc_ablation", "loss_curves"):
+        assert r["figures"] and all(Path(f).is_file() for f in r["figures"])
+    if name == "loss_curves":
+        assert json.loads((root / "loss.json").read_text())["mean"] == pytest.approx([0.8, 0.3, 0.15])
+    data_json = json.loads((root / "paper.json").read_text())
+    assert name in data_json["experiments"]
+    assert (root / "REPORT.md").read_text().count("## ") >= 2
+
+
+def test_paper_composes_every_experiment():
+    cfg = compose_eval("+experiment=paper")
+    assert list(cfg.suite) == EXPERIMENTS
+    assert cfg.suite.training.episodes == 10000 and cfg.suite.extended.episodes == 50000
+    assert cfg.suite.extended.task.target == [11.5, -3.5, 4.5]
+    angles = list(cfg.suite.misalignment.angles)
+    assert angles[0] == 0 and angles[-1] == 180 and max(np.diff(angles)) <= 15
+    ratios = list(cfg.suite.abc_ablation.ratios)
+    assert len(ratios) >= 6 and min(ratios) == pytest.approx(0.029) and max(ratios) == pytest.approx(0.29)
+    assert cfg.suite.abc.env.swim_speed_scale == 0.1
+
+
+def test_missing_checkpoints_are_skipped_with_the_command(tiny_world, tmp_path):
+    import evaluate
+
+    root, data, ck = tiny_world
+    cfg = compose_eval(
+        "+experiment=paper_training",
+        f"flow.path={data}",
+        "max_episodes=8",
+        "env.time_limit=2.0",
+        f"results={tmp_path / 'p.json'}",
+        f"report={tmp_path / 'R.md'}",
+        f"figures_dir={tmp_path}",
+        f"policies.teacher.checkpoint={tmp_path / 'none.pt'}",
+        f"policies.student.checkpoint={ck['student']}",
+        f"policies.baseline.checkpoint={ck['baseline']}",
+    )
+    r = evaluate.run(cfg, log=lambda *_: None)["training"]
+    assert set(r["results"]) == {"student", "baseline"}
+    assert any("python train.py +experiment=teacher" in m for m in r["missing"])
+    assert "python train.py +experiment=teacher" in (tmp_path / "R.md").read_text()
+
+
+def test_single_checkpoint_and_wrong_view_is_refused(tiny_world, tmp_path):
+    import evaluate
+
+    root, data, ck = tiny_world
+    cfg = compose_eval(
+        f"checkpoint={ck['student']}",
+        f"flow.path={data}",
+        "episodes=30",
+        "chunk_size=7",
+        "env.time_limit=2.0",
+        f"output={tmp_path / 's.json'}",
+    )
+    out = evaluate.run(cfg, log=lambda *_: None)
+    assert out["episodes"] == 30 and json.loads((tmp_path / "s.json").read_text())["episodes"] == 30
+    cfg = compose_eval(f"checkpoint={ck['teacher']}", "expect_obs=ego", f"flow.path={data}", "episodes=5")
+    with pytest.raises(CheckpointError, match=r"reading 'geo'.*needs 'ego'"):
+        evaluate.run(cfg, log=lambda *_: None)
+    # In the suite, a checkpoint of the wrong view is skipped with the same message.
+    cfg = compose_eval(
+        "+experiment=paper_abc",
+        "max_episodes=4",
+        "env.time_limit=1.0",
+        f"results={tmp_path / 'p.json'}",
+        f"report={tmp_path / 'R.md'}",
+        f"figures_dir={tmp_path}",
+        f"policies.teacher.checkpoint={ck['teacher']}",
+        f"policies.student.checkpoint={ck['teacher']}",
+    )
+    r = evaluate.run(cfg, log=lambda *_: None)["abc"]
+    assert "teacher" in r["results"] and "student" not in r["results"]
+    assert any("needs 'ego'" in m for m in r["missing"])
+
+
+def test_example_episode_is_one_the_policies_solve():
+    from flownav.evaluation.experiments import _pick_episode
+
+    s, f = int(Status.SUCCESS), int(Status.TIMEOUT)
+    runs = {"teacher": {"status": torch.tensor([f, s, s, f])}, "student": {"status": torch.tensor([s, f, s, s])}}
+    assert _pick_episode(runs, ["teacher", "student"]) == 2
+    runs["teacher"]["status"] = torch.tensor([f, s, f, f])
+    assert _pick_episode(runs, ["teacher", "student"]) == 0  # none both solve: the student's first success
+    assert _pick_episode({"baseline": {"status": torch.tensor([f])}}, ["teacher"]) == 0
+
+
+def test_report_puts_the_paper_next_to_ours(tmp_path):
+    from flownav.evaluation.report import merge_results, provenance, write_report
+
+    status = torch.tensor([int(Status.SUCCESS)] * 9 + [int(Status.LEFT_DOMAIN)])
+    s = summarize(status, torch.full((10,), 25.0))
+    res = {
+        "training": {
+            "title": "a. Training flow",
+            "kind": "success",
+            "paper": {"student": {"success": 94.44, "time": 25.31}},
+            "results": {"student": s},
+            "missing": [
+                "teacher: missing checkpoint checkpoints/teacher.pt: run `python train.py +experiment=teacher`"
+            ],
+            "policies": {},
+            "command": "python evaluate.py +experiment=paper_training",
+        }
+    }
+    data = merge_results(tmp_path / "paper.json", res, provenance("python evaluate.py +experiment=paper"))
+    text = write_report(data, tmp_path / "REPORT.md", "python evaluate.py +experiment=paper").read_text()
+    lo, hi = wilson_interval(9, 10)
+    assert "| student | 94.44% | 90.00% |" in text and f"[{100 * lo:.2f}, {100 * hi:.2f}]" in text
+    assert "25.31 | 25.00 | 10.00%" in text
+    assert "python evaluate.py +experiment=paper_training" in text and "+experiment=teacher" in text
+    assert "Student in the training flow: 90.00% -> NOT met" in text
+    assert json.loads((tmp_path / "paper.json").read_text())["experiments"]["training"]["provenance"]["commit"]

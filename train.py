@@ -1,0 +1,95 @@
+"""Train a navigation policy from composable Hydra configs.
+
+    python train.py +experiment=teacher                       # PPO geo teacher on the cylinder wake
+    python train.py +experiment=baseline_ego                  # PPO ego baseline
+    python train.py -m +experiment=teacher seed=0,1,2,3,4     # five seeds, local joblib launcher
+    python train.py -m hydra/launcher=slurm +experiment=teacher seed=0,1,2,3,4   # on a SLURM cluster
+    python train.py +experiment=teacher resume=outputs/teacher/<run>             # continue a run
+    python train.py +experiment=teacher flow=vortex_street algo.total_frames=2e6 # analytic stand-in flow
+
+The run directory (Hydra's output dir) holds config.yaml, metrics.csv, checkpoints/ and final_metrics.json.
+``train.py`` dispatches on ``algo.name`` to ``flownav.algorithms.<name>.train(cfg, run_dir)``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import math
+import os
+from pathlib import Path
+
+import hydra
+import torch
+from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
+from omegaconf import DictConfig, OmegaConf
+
+from flownav.algorithms import ALGORITHMS
+from flownav.builders import ConfigError
+from flownav.runlog import WANDB_MODES
+
+
+def validate(cfg: DictConfig) -> None:
+    """Checks every trainer relies on; algorithm-specific ones live in the algorithm module."""
+    if cfg.algo.name not in ALGORITHMS:
+        raise ConfigError(f"algo.name is {cfg.algo.name!r}; choose one of {sorted(ALGORITHMS)}")
+    if cfg.logger.wandb.mode not in WANDB_MODES:
+        raise ConfigError(f"logger.wandb.mode is {cfg.logger.wandb.mode!r}; choose one of {list(WANDB_MODES)}")
+    if cfg.threads is not None and int(cfg.threads) < 1:
+        raise ConfigError(f"threads must be >= 1 or null, got {cfg.threads}")
+    try:
+        torch.device(cfg.device)
+    except RuntimeError as e:
+        raise ConfigError(f"device {cfg.device!r} is not a torch device ({e})") from e
+    if not isinstance(cfg.seed, int):
+        raise ConfigError(f"seed must be an integer, got {cfg.seed!r}")
+
+
+def pick_threads(cfg: DictConfig) -> int:
+    if cfg.threads is not None:
+        return int(cfg.threads)
+    cores = os.cpu_count() or 1
+    try:
+        hc = HydraConfig.get()
+        if hc.mode == RunMode.MULTIRUN:
+            jobs = int(OmegaConf.select(hc, "launcher.n_jobs", default=1) or 1)
+            jobs = jobs if jobs > 0 else cores
+            return max(1, cores // jobs)
+    except ValueError:  # not running under Hydra (tests call run() directly)
+        pass
+    return cores
+
+
+def resume_run_dir(resume) -> Path | None:
+    """A resumed run writes into the directory it resumes (its metrics.csv and checkpoints continue)."""
+    path = Path(str(resume)).expanduser()
+    if path.is_dir():
+        return path
+    if path.is_file() and path.parent.name == "checkpoints":
+        return path.parent.parent
+    return None
+
+
+def run(cfg: DictConfig, run_dir: str | Path) -> dict:
+    validate(cfg)
+    torch.set_num_threads(pick_threads(cfg))
+    if cfg.resume:
+        run_dir = resume_run_dir(cfg.resume) or run_dir
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    OmegaConf.save(cfg, run_dir / ("config_resumed.yaml" if cfg.resume else "config.yaml"), resolve=True)
+    algo = importlib.import_module(ALGORITHMS[cfg.algo.name])
+    metrics = algo.train(cfg, run_dir)
+    clean = {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in metrics.items()}
+    (run_dir / "final_metrics.json").write_text(json.dumps(clean, indent=2, default=str))
+    return clean
+
+
+@hydra.main(version_base="1.3", config_path="conf", config_name="config")
+def main(cfg: DictConfig):
+    return run(cfg, HydraConfig.get().runtime.output_dir)
+
+
+if __name__ == "__main__":
+    main()
