@@ -33,10 +33,10 @@ REF_3D = {"St": 0.203, "Cd": 1.27}
 @dataclass(frozen=True)
 class GenerateConfig:
     sim: SimConfig = field(default_factory=SimConfig)
-    warmup: float = 100.0  # D/U before recording: shedding and mode-B structure saturate
+    warmup: float = 80.0  # D/U before recording: shedding and 3D structure saturate by ~40
     record: float = 30.0  # D/U recorded (~6 periods); the looped window is chosen inside it
     frame_dt: float = 0.25  # ~20 frames per shedding period at St ~ 0.2
-    out_spacing: float = 0.2  # stored grid spacing (a multiple of the lattice spacing)
+    out_spacing: float = 0.25  # stored grid spacing (3 lattice cells); divides Lz = 4
     min_periods: int = 3
 
     def check(self) -> None:
