@@ -138,3 +138,22 @@ def test_teacher_of_the_wrong_view_is_refused(tmp_path):
         train.run(make_cfg(ego, "algo.iterations=1"), tmp_path / "run")
     with pytest.raises(CheckpointError, match="no checkpoint"):
         train.run(make_cfg(tmp_path / "nothing.pt", "algo.iterations=1"), tmp_path / "run2")
+
+
+def test_beta_one_executes_the_teacher(teacher_ckpt):
+    from flownav.agents import DeterministicPolicy
+    from flownav.algorithms.dagger import collect
+    from flownav.envs import NavigationEnv, RegionTask
+    from flownav.evaluation.scripted import ACTION_LOW, action_high
+    from flownav.flows import Box, UniformFlow
+
+    teacher, _ = load_policy(teacher_ckpt, expect_obs="geo")
+    torch.manual_seed(0)
+    student = DeterministicPolicy(6, ACTION_LOW, action_high(), hidden=(8,)).eval()
+    task = RegionTask(Box((5.0, 0.0, 5.0), (6.0, 1.0, 6.0)), Box((7.0, 0.0, 5.0), (8.0, 1.0, 6.0)))
+    stats = {}
+    for beta in (0.0, 1.0):
+        env = NavigationEnv(UniformFlow((0.1, 0.0, 0.0)), task, num_envs=64, views=("ego", "geo"), seed=0)
+        data, stats[beta] = collect(env, student, teacher, "ego", "geo", 60, beta, torch.Generator().manual_seed(0))
+        assert data["obs"].shape == (64 * 60, 6) and data["teacher_action"].shape == (64 * 60, 3)
+    assert stats[1.0]["success_rate"] > 0.9 > stats[0.0]["success_rate"] or stats[0.0]["episodes"] == 0

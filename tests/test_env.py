@@ -347,3 +347,13 @@ def test_bad_config_values_name_the_key():
             RegionTask(),
             ("geo",),
         )
+
+
+def test_time_limit_is_a_whole_number_of_steps_without_float_drift():
+    env = NavigationEnv(still_water(), ListTask([[0.0, 0, 0]], [[50.0, 0, 0]]), num_envs=1, dt=0.2, time_limit=6.0)
+    td = env.reset()
+    for step in range(1, 31):
+        td["action"] = torch.zeros(1, 3)
+        td = env.step(td)["next"]
+        assert td["truncated"].item() == (step == 30)
+    assert td["time"].item() == pytest.approx(6.0, abs=1e-6)

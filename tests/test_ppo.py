@@ -26,6 +26,7 @@ TINY = [
     "env.reward.success_radius=0.5",
     "algo.lr=1e-3",
     "algo.rollout_steps=16",
+    "algo.epochs=4",
     "algo.minibatch_size=1024",
     "algo.actor.hidden=[64,64]",
     "algo.critic.hidden=[64,64]",

@@ -47,9 +47,10 @@ class ObsNormalizer(nn.Module):
         batch_mean, batch_var = x.mean(0), x.var(0, unbiased=False)
         total = self.count + n
         delta = batch_mean - self.mean
-        self.mean += delta * n / total
-        self.var = (self.var * self.count + batch_var * n + delta**2 * self.count * n / total) / total
-        self.count = total
+        # In place: TorchRL losses hold references to these buffers; rebinding them leaves stale copies.
+        self.var.copy_((self.var * self.count + batch_var * n + delta**2 * self.count * n / total) / total)
+        self.mean.add_(delta * n / total)
+        self.count.copy_(total)
 
     def forward(self, x: Tensor) -> Tensor:
         return ((x - self.mean) / (self.var + self.eps).sqrt()).clamp(-self.clip, self.clip)

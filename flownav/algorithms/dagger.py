@@ -25,6 +25,7 @@ continues exactly where the run stopped.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import shutil
@@ -148,6 +149,7 @@ def train(cfg, run_dir) -> dict:
     torch.manual_seed(seed)
 
     teacher, teacher_payload = load_policy(resolve(str(cfg.teacher_checkpoint)), expect_obs=teacher_view, device=device)
+    teacher_sha = hashlib.sha256(resolve(str(cfg.teacher_checkpoint)).read_bytes()).hexdigest()[:12]
     flow = build_flow(cfg.flow, device=device)
     task = build_task(cfg.task, flow)
     env = build_env(
@@ -214,6 +216,7 @@ def train(cfg, run_dir) -> dict:
             "iteration": iteration,
             "frames": frames,
             "teacher_checkpoint": str(cfg.teacher_checkpoint),
+            "teacher_sha256": teacher_sha,
             "metrics": metrics,
         }
         return save_policy_checkpoint(ckpt_dir / name, student, student_view, role, meta=meta, train_state=train_state)

@@ -99,22 +99,6 @@ def make_actor_critic(obs_key: str, critic_key: str, low, high, actor_cfg, criti
 
 
 @torch.no_grad()
-def update_normalizer(norm: ObsNormalizer, x) -> None:
-    """``norm.update(x)`` keeping the buffers' identity.
-
-    ``ObsNormalizer.update`` rebinds ``var`` and ``count`` to new tensors; TorchRL losses hold the
-    actor's and critic's buffers captured at construction, so a rebinding would leave the loss
-    scoring with stale statistics while the collector acts with fresh ones (a growing, spurious KL).
-    """
-    old = {k: getattr(norm, k) for k in ("mean", "var", "count")}
-    norm.update(x)
-    for k, t in old.items():
-        new = getattr(norm, k)
-        if new is not t:
-            t.copy_(new)
-            setattr(norm, k, t)
-
-
 # ----------------------------------------------------------------------------- config checks
 def check_config(cfg) -> None:
     """Fail at start, naming the key, on values Hydra's types cannot catch."""
@@ -305,8 +289,8 @@ def train(cfg, run_dir) -> dict:
     else:
         # Warm the normalisers up on the first observations so the first batch sees sane inputs.
         first = env.reset()
-        update_normalizer(policy.normalizer, first[obs_key])
-        update_normalizer(critic_net.normalizer, first[critic_key])
+        policy.normalizer.update(first[obs_key])  # in place: the loss holds these buffers
+        critic_net.normalizer.update(first[critic_key])
 
     collector = Collector(
         env,
@@ -401,8 +385,8 @@ def train(cfg, run_dir) -> dict:
                     )
             # Normalisers move after the update: the next batch is collected with the new statistics.
             if normalize_online:
-                update_normalizer(policy.normalizer, data[obs_key])
-                update_normalizer(critic_net.normalizer, data[critic_key])
+                policy.normalizer.update(data[obs_key])
+                critic_net.normalizer.update(data[critic_key])
             collector.update_policy_weights_()
             t_train = time.time() - t_train
 

@@ -103,8 +103,12 @@ def cmd_eval(args) -> dict:
 
 def read_curve(run_dir: Path, key: str):
     rows = list(csv.DictReader(open(Path(run_dir) / "metrics.csv", newline="")))
-    pts = [(float(r["step"]), float(r[key])) for r in rows if r.get(key) not in (None, "", "nan")]
-    return [p[0] for p in pts], [p[1] for p in pts]
+    pts = {}
+    for r in rows:  # one value per step (the first), in step order
+        if r.get(key) not in (None, "", "nan"):
+            pts.setdefault(float(r["step"]), float(r[key]))
+    steps = sorted(pts)
+    return steps, [pts[s] for s in steps]
 
 
 def cmd_curves(args) -> None:

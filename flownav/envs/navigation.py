@@ -90,6 +90,8 @@ class NavigationEnv(EnvBase):
         self.flow = RotatedFlow(base, misalignment_deg, rotation_center) if misalignment_deg else base
         self.task = task if task is not None else RegionTask()
         self.dt, self.time_limit = float(dt), float(time_limit)
+        # Episodes are truncated after a whole number of steps; time is that count times dt (no float drift).
+        self.max_steps = max(1, round(self.time_limit / self.dt))
         self.u_max, self.swim_speed_scale = float(u_max), float(swim_speed_scale)
         self.reward_cfg = reward or RewardConfig()
         self.random_flow_phase = random_flow_phase
@@ -134,6 +136,7 @@ class NavigationEnv(EnvBase):
         self.theta, self.psi, self.time, self.t0 = z(), z(), z(), z()
         self.start_dist, self.dist, self.speed = z(), z(), z()
         self.status = torch.zeros(B, dtype=torch.int64, device=dev)
+        self.steps = torch.zeros(B, dtype=torch.int64, device=dev)
 
     def _set_seed(self, seed: int | None):
         self.rng.manual_seed(int(seed) if seed is not None else 0)
@@ -195,6 +198,7 @@ class NavigationEnv(EnvBase):
                 put(self.speed, zero),
             )
             self.status = put(self.status, torch.zeros_like(idx))
+            self.steps = put(self.steps, torch.zeros_like(idx))
             # At rest relative to the fluid until the first action.
             self.flow_vel, self.vel = put(self.flow_vel, flow_vel), put(self.vel, flow_vel)
             self.start_dist, self.dist = put(self.start_dist, d), put(self.dist, d)
@@ -212,7 +216,8 @@ class NavigationEnv(EnvBase):
         self.speed = speed * self.swim_speed_scale
         swim = self.speed[:, None] * heading_vector(self.theta, self.psi)
         self.pos, _ = move(self.pos, swim, self.flow_vel, self.dt)
-        self.time = self.time + self.dt
+        self.steps = self.steps + 1
+        self.time = self.steps * self.dt
         self.flow_vel = self.flow.velocity(self.pos, self.t0 + self.time)
         self.vel = swim + self.flow_vel
 
@@ -221,8 +226,7 @@ class NavigationEnv(EnvBase):
         success = self.dist < self.reward_cfg.success_radius
         left = ~self.flow.in_domain(self.pos)
         hit = self.flow.in_obstacle(self.pos)
-        # time_limit is reached after round(time_limit / dt) steps; the 1e-6 absorbs rounding.
-        timeout = self.time >= self.time_limit - 1e-6
+        timeout = self.steps >= self.max_steps
         status = torch.full_like(self.status, Status.RUNNING)
         status = torch.where(timeout, Status.TIMEOUT, status)
         status = torch.where(hit, Status.HIT_OBSTACLE, status)

@@ -169,6 +169,12 @@ def _verdicts(exps: dict) -> list[str]:
         lines.append(
             f"- Student in the training flow: {pct(s)} -> {'met' if s >= 0.95 else 'NOT met'} (target >= 95%)."
         )
+        if "teacher" in tr and tr["teacher"]["success_rate"] > 0:
+            t = tr["teacher"]["success_rate"]
+            lines.append(
+                f"- Student against its teacher: {pct(s)} vs {pct(t)}, the student keeps {100 * s / t:.0f}% of the "
+                f"teacher's success (paper: 94.44% vs 94.69%, 99.7%)."
+            )
     mis = exps.get("misalignment", {}).get("results", {})
     if "student" in mis:
         rates = [v["success_rate"] for v in mis["student"].values()]
@@ -192,10 +198,15 @@ def _verdicts(exps: dict) -> list[str]:
     return lines + [""]
 
 
-def _performance(seconds: float | None) -> list[str]:
+def _performance(seconds: float | None, exps: dict) -> list[str]:
     lines = ["## Performance", ""]
     if seconds is not None:
         lines.append(f"- This run of `evaluate.py`: {seconds / 60:.1f} minutes (goal for the whole suite: <= 60).")
+    total = sum(float(r.get("seconds") or 0) for r in exps.values())
+    lines.append(
+        f"- The experiments below, as last run, took {total / 60:.1f} minutes together (the per-experiment times "
+        "are in each section; goal for `+experiment=paper`: <= 60 minutes)."
+    )
     bench = REPO_ROOT / "benchmarks" / "results" / "eval_throughput.json"
     if bench.is_file():
         try:
@@ -223,7 +234,7 @@ def write_report(data: dict, path: Path, command: str, seconds: float | None = N
         "",
     ]
     lines += _verdicts(exps)
-    lines += _performance(seconds)
+    lines += _performance(seconds, exps)
     for name, r in exps.items():
         lines += _header(name, r, command)
         kind = r.get("kind")
@@ -251,3 +262,19 @@ def write_report(data: dict, path: Path, command: str, seconds: float | None = N
     tmp.write_text("\n".join(lines) + "\n")
     os.replace(tmp, path)
     return path
+
+
+def main(argv=None) -> None:
+    """``python -m flownav.evaluation.report``: rewrite REPORT.md from results/paper.json (no evaluation)."""
+    import argparse
+
+    p = argparse.ArgumentParser(description=main.__doc__)
+    p.add_argument("--results", default=str(REPO_ROOT / "results" / "paper.json"))
+    p.add_argument("--report", default=str(REPO_ROOT / "REPORT.md"))
+    a = p.parse_args(argv)
+    data = json.loads(Path(a.results).read_text())
+    print(write_report(data, Path(a.report), "python -m flownav.evaluation.report"))
+
+
+if __name__ == "__main__":
+    main()
