@@ -21,6 +21,7 @@ from tensordict.nn import TensorDictModule
 
 from flownav.agents.networks import DeterministicPolicy
 from flownav.atomic import atomic_write
+from flownav.builders import ConfigError
 from flownav.envs.observations import observation_size
 
 FORMAT = "flownav-policy-v1"
@@ -65,6 +66,22 @@ def load_checkpoint(path) -> dict:
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         raise CheckpointError(f"{path} is not a {FORMAT} checkpoint")
     return payload
+
+
+def find_resume_checkpoint(resume) -> Path:
+    """The checkpoint a ``resume=`` value names: a file, or a run directory's ``checkpoints/last.pt``.
+
+    A wrong value is a config error (``ConfigError``), reported at start like any other bad key.
+    """
+    path = Path(str(resume)).expanduser()
+    if path.is_dir():
+        for candidate in (path / "checkpoints" / "last.pt", path / "last.pt"):
+            if candidate.is_file():
+                return candidate
+        raise ConfigError(f"resume={resume}: no checkpoints/last.pt in that run directory")
+    if not path.is_file():
+        raise ConfigError(f"resume={resume}: no such run directory or checkpoint file")
+    return path
 
 
 def load_policy(path, expect_obs: str | None = None, device="cpu") -> tuple[DeterministicPolicy, dict]:

@@ -18,12 +18,15 @@
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 import time
 import warnings
 from collections.abc import Mapping
 from pathlib import Path
+
+from flownav.atomic import atomic_write_text
 
 WANDB_MODES = ("offline", "online", "disabled")
 
@@ -132,12 +135,11 @@ class RunLogger:
         self._write_all(rows)
 
     def _write_all(self, rows) -> None:
-        tmp = self.csv_path.with_suffix(".csv.tmp")
-        with open(tmp, "w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=self._fields, extrasaction="ignore")
-            writer.writeheader()
-            writer.writerows(rows)
-        os.replace(tmp, self.csv_path)
+        buffer = io.StringIO(newline="")
+        writer = csv.DictWriter(buffer, fieldnames=self._fields, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(rows)
+        atomic_write_text(self.csv_path, buffer.getvalue())
 
     def log(self, step: int, metrics: Mapping[str, float]) -> None:
         row = {"step": int(step), "wall_time": round(time.time() - self.t0, 3)}

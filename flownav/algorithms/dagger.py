@@ -40,7 +40,13 @@ from torchrl.data.replay_buffers.samplers import RandomSampler
 
 from flownav.agents.networks import DeterministicPolicy
 from flownav.builders import ConfigError, build_env, build_flow, build_task
-from flownav.checkpoint import atomic_torch_save, load_checkpoint, load_policy, save_policy_checkpoint
+from flownav.checkpoint import (
+    atomic_torch_save,
+    find_resume_checkpoint,
+    load_checkpoint,
+    load_policy,
+    save_policy_checkpoint,
+)
 from flownav.envs.navigation import Status
 from flownav.envs.observations import observation_size
 from flownav.paths import resolve
@@ -85,18 +91,6 @@ def set_normalizer_from(policy: DeterministicPolicy, obs: torch.Tensor) -> None:
     norm.mean.copy_(obs.mean(0))
     norm.var.copy_(obs.var(0, unbiased=False))
     norm.count.fill_(obs.shape[0])
-
-
-def _find_resume(resume) -> Path:
-    path = Path(str(resume)).expanduser()
-    if path.is_dir():
-        for c in (path / "checkpoints" / "last.pt", path / "last.pt"):
-            if c.is_file():
-                return c
-        raise ConfigError(f"resume={resume}: no checkpoints/last.pt in that run directory")
-    if not path.is_file():
-        raise ConfigError(f"resume={resume}: no such run directory or checkpoint file")
-    return path
 
 
 @torch.no_grad()
@@ -176,7 +170,7 @@ def train(cfg, run_dir) -> dict:
     ckpt_dir = run_dir / "checkpoints"
     iteration, frames, wall_offset, history = 0, 0, 0.0, []
     if cfg.get("resume"):
-        path = _find_resume(cfg.resume)
+        path = find_resume_checkpoint(cfg.resume)
         payload = load_checkpoint(path)
         if payload["obs"] != student_view:
             raise ConfigError(

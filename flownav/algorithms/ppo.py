@@ -34,7 +34,7 @@ from torchrl.objectives.value import GAE
 
 from flownav.agents.networks import ACTIVATIONS, DeterministicPolicy, ObsNormalizer, mlp
 from flownav.builders import ConfigError, build_env, build_flow, build_task
-from flownav.checkpoint import load_checkpoint, save_policy_checkpoint
+from flownav.checkpoint import find_resume_checkpoint, load_checkpoint, save_policy_checkpoint
 from flownav.envs.navigation import NavigationEnv, Status
 from flownav.envs.observations import VIEWS, observation_size
 from flownav.runlog import RunLogger
@@ -175,19 +175,6 @@ def evaluate_policy(policy, make_env, obs_key: str, episodes: int, chunk: int = 
 
 
 # ----------------------------------------------------------------------------- checkpoints
-def find_resume_checkpoint(resume) -> Path:
-    path = Path(str(resume)).expanduser()
-    if path.is_dir():
-        cands = [path / "checkpoints" / "last.pt", path / "last.pt"]
-        for c in cands:
-            if c.is_file():
-                return c
-        raise ConfigError(f"resume={resume}: no checkpoints/last.pt in that run directory")
-    if not path.is_file():
-        raise ConfigError(f"resume={resume}: no such run directory or checkpoint file")
-    return path
-
-
 def _rng_state(env: NavigationEnv) -> dict:
     return {"torch": torch.get_rng_state(), "env": env.rng.get_state()}
 

@@ -50,15 +50,11 @@ def main(argv=None) -> None:
     gen.add_argument("--out", type=Path, default=DEFAULT_OUT)
     gen.add_argument("--run-dir", type=Path, default=DEFAULT_RUN_DIR)
 
-    val = sub.add_parser(
-        "validate", help="2D Re=100 run + 3D dataset check -> results/cfd_validation.json"
-    )
+    val = sub.add_parser("validate", help="2D Re=100 run + 3D dataset check -> results/cfd_validation.json")
     val.add_argument("--dataset", type=Path, default=DEFAULT_OUT)
     val.add_argument("--out", type=Path, default=Path("results/cfd_validation.json"))
     val.add_argument("--run-dir", type=Path, default=Path("runs/cfd/validate_2d_re100"))
-    val.add_argument(
-        "--cells-per-d", type=int, default=None, help="2D resolution (default in validate.py)"
-    )
+    val.add_argument("--cells-per-d", type=int, default=None, help="2D resolution (default in validate.py)")
 
     plot = sub.add_parser("plot", help="wake figures -> docs/figures/wake_*.png")
     plot.add_argument("--dataset", type=Path, default=DEFAULT_OUT)

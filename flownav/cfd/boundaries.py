@@ -34,9 +34,7 @@ class Links:
     coef: Tensor  # [K, 3] Bouzidi weights of src_a, src_b, src_c
     target: Tensor  # [K] flat index into the [Q, B] pulled block: opp(i) * B + b
     c_link: Tensor  # [K, 3] lattice velocity c_i of each link (towards the wall)
-    solid_nodes: (
-        Tensor  # [S] flat indices of solid nodes incl. z ghosts (reset to rest equilibrium)
-    )
+    solid_nodes: Tensor  # [S] flat indices of solid nodes incl. z ghosts (reset to rest equilibrium)
     ghost_src: Tensor  # boundary nodes on the first/last z layer ...
     ghost_dst: Tensor  # ... and their periodic ghost copies
     beta_index: Tensor  # [B] x-plane of each boundary node (to pick its relaxation rate)
@@ -77,9 +75,7 @@ def cylinder_links(lat: Lattice, grid, center_lat, radius_lat, device="cpu") -> 
             back = 0 <= a - cx < nx and 0 <= b - cy < ny and not solid2[a - cx, b - cy]
             links.append((node_of[a, b], i, q, back))
     if not links:
-        raise ValueError(
-            "the cylinder covers no lattice node; check its position and the resolution"
-        )
+        raise ValueError("the cylinder covers no lattice node; check its position and the resolution")
     nodes2 = np.array(nodes2)
     z = np.arange(nz)
     # Replicate over the span: boundary node (k2, z) has id k2 * nz + z.
@@ -112,9 +108,7 @@ def cylinder_links(lat: Lattice, grid, center_lat, radius_lat, device="cpu") -> 
     beta_index = np.repeat(nodes2[:, 0], nz)
 
     def t(a, dtype=torch.int64):
-        return torch.as_tensor(
-            np.concatenate(a) if isinstance(a, list) else a, dtype=dtype, device=device
-        )
+        return torch.as_tensor(np.concatenate(a) if isinstance(a, list) else a, dtype=dtype, device=device)
 
     return Links(
         nodes=t(nodes),

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import torch
 
-from flownav.cfd.lattice import Lattice, get_lattice
+from flownav.cfd.lattice import Lattice, get_lattice, shear_coefficients
 
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
@@ -63,14 +63,7 @@ def _collision_body(lat: Lattice) -> list[str]:
     s.append("float sh = 0.0f, hh = 0.0f;")
     pd = ["q00", "q11", "q22", "p01", "p02", "p12"]
     for i, (ci, wi) in enumerate(zip(lat.c, lat.w, strict=True)):
-        co = [
-            ci[0] ** 2,
-            ci[1] ** 2,
-            ci[2] ** 2,
-            2 * ci[0] * ci[1],
-            2 * ci[0] * ci[2],
-            2 * ci[1] * ci[2],
-        ]
+        co = shear_coefficients(ci)
         s.append(f"float s{i} = {4.5 * wi!r}f * {_lin(co, pd)};")
         s.append(f"float h{i} = d{i} - s{i};")
         s.append(f"float ie{i} = 1.0f / fe{i};")
@@ -162,9 +155,7 @@ void collide(float* restrict g, const float* restrict beta_n, long n) {{
 
 
 def _cache_dir() -> Path:
-    root = os.environ.get("FLOWNAV_CACHE") or os.path.join(
-        os.path.expanduser("~"), ".cache", "flownav"
-    )
+    root = os.environ.get("FLOWNAV_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "flownav")
     path = Path(root) / "cfd_kernels"
     path.mkdir(parents=True, exist_ok=True)
     return path
@@ -192,9 +183,7 @@ def load(lattice: str):
             c_file.write_text(src)
             tmp_so = Path(tmp) / "lbm.so"
             try:
-                subprocess.run(
-                    ["gcc", *flags, "-o", str(tmp_so), str(c_file)], check=True, capture_output=True
-                )
+                subprocess.run(["gcc", *flags, "-o", str(tmp_so), str(c_file)], check=True, capture_output=True)
             except (OSError, subprocess.CalledProcessError) as e:
                 err = getattr(e, "stderr", b"") or b""
                 raise RuntimeError(

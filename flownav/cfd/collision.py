@@ -17,7 +17,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from flownav.cfd.lattice import Lattice
+from flownav.cfd.lattice import Lattice, shear_coefficients
 
 # Pairs (a, b) of the symmetric second moment, in the order xx, yy, zz, xy, xz, yz.
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
@@ -52,11 +52,7 @@ def kbc(lat: Lattice, f: list[Tensor], beta: Tensor | float) -> list[Tensor]:
     feq, df = [], []
     for ci, wi, fi in zip(lat.c, lat.w, f, strict=True):
         cu = _dot(ci, (ux, uy, uz))
-        feq_i = (
-            wi * rho * (1 - usq15)
-            if cu is None
-            else wi * rho * (1 + 3 * cu + 4.5 * cu * cu - usq15)
-        )
+        feq_i = wi * rho * (1 - usq15) if cu is None else wi * rho * (1 + 3 * cu + 4.5 * cu * cu - usq15)
         feq.append(feq_i)
         df.append(fi - feq_i)
     # Non-equilibrium second moment and its traceless part.
@@ -66,14 +62,7 @@ def kbc(lat: Lattice, f: list[Tensor], beta: Tensor | float) -> list[Tensor]:
     ds, dh = [], []
     for ci, wi, dfi in zip(lat.c, lat.w, df, strict=True):
         # c.Pd.c with off-diagonal terms counted twice; the Hermite projection weight is 9/2.
-        coeffs = [
-            ci[0] ** 2,
-            ci[1] ** 2,
-            ci[2] ** 2,
-            2 * ci[0] * ci[1],
-            2 * ci[0] * ci[2],
-            2 * ci[1] * ci[2],
-        ]
+        coeffs = shear_coefficients(ci)
         cpc = _dot(coeffs, pd)
         dsi = None if cpc is None else (4.5 * wi) * cpc  # the rest population has no shear part
         ds.append(dsi)

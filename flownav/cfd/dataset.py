@@ -55,9 +55,7 @@ class GenerateConfig:
         lo, hi = NAV_BOX.lo, NAV_BOX.hi
         x0, x1 = self.sim.x_range
         if not (x0 < lo[0] and x1 > hi[0] and self.sim.y_half > hi[1]):
-            raise ValueError(
-                f"the lattice x {self.sim.x_range}, |y| < {self.sim.y_half} must contain {NAV_BOX}"
-            )
+            raise ValueError(f"the lattice x {self.sim.x_range}, |y| < {self.sim.y_half} must contain {NAV_BOX}")
 
 
 def output_axes(cfg: GenerateConfig):
@@ -92,9 +90,7 @@ def simulate(cfg: GenerateConfig, run_dir: Path, device="cpu") -> tuple[Cylinder
     cfg.check()
     sim = CylinderLBM(cfg.sim, device=device)
     run_dir.mkdir(parents=True, exist_ok=True)
-    (run_dir / "config.json").write_text(
-        json.dumps({"sim": cfg.sim.to_dict(), **_gen_dict(cfg)}, indent=2)
-    )
+    (run_dir / "config.json").write_text(json.dumps({"sim": cfg.sim.to_dict(), **_gen_dict(cfg)}, indent=2))
     state = run(
         sim,
         cfg.warmup + cfg.record,
@@ -108,9 +104,7 @@ def simulate(cfg: GenerateConfig, run_dir: Path, device="cpu") -> tuple[Cylinder
 
 
 def _gen_dict(cfg: GenerateConfig) -> dict:
-    return {
-        k: getattr(cfg, k) for k in ("warmup", "record", "frame_dt", "out_spacing", "min_periods")
-    }
+    return {k: getattr(cfg, k) for k in ("warmup", "record", "frame_dt", "out_spacing", "min_periods")}
 
 
 def wake_diagnostics(cfg: GenerateConfig, state: RunState) -> dict:
@@ -126,9 +120,7 @@ def wake_diagnostics(cfg: GenerateConfig, state: RunState) -> dict:
     stats["St_probe_spectrum"] = diagnostics.dominant_frequency(probe_v, dts)
     stats["St"] = stats["St_lift_spectrum"]
     late = h["rmsw_t"] >= cfg.warmup
-    stats["rms_w_near_wake_lattice"] = (
-        float(np.mean(h["rmsw"][late])) if late.any() else float("nan")
-    )
+    stats["rms_w_near_wake_lattice"] = float(np.mean(h["rmsw"][late])) if late.any() else float("nan")
     stats["rms_w_history"] = {
         "t": h["rmsw_t"][::5].round(2).tolist(),
         "rms_w": h["rmsw"][::5].round(4).tolist(),
@@ -142,9 +134,7 @@ def write_dataset(cfg: GenerateConfig, state: RunState, out: Path, command: str)
     period_frames = 1.0 / (stats["St"] * cfg.frame_dt)
     frame_bytes = frames[0].nbytes
     max_frames = MAX_BYTES // frame_bytes
-    start, T, seam = diagnostics.best_loop_window(
-        frames, period_frames, cfg.min_periods, max_frames
-    )
+    start, T, seam = diagnostics.best_loop_window(frames, period_frames, cfg.min_periods, max_frames)
     velocity = frames[start : start + T]
     _, origin, spacing = output_axes(cfg)
     x = cfg.out_spacing * np.arange(velocity.shape[1]) + origin[0]
@@ -188,11 +178,9 @@ def write_dataset(cfg: GenerateConfig, state: RunState, out: Path, command: str)
             "y": [-sim.y_half, sim.y_half],
             "z": [0.0, sim.span],
         },
-        "boundaries": "inflow equilibrium u=U, outflow rho=1 + sponge, periodic y and z, "
-        "Bouzidi cylinder",
+        "boundaries": "inflow equilibrium u=U, outflow rho=1 + sponge, periodic y and z, Bouzidi cylinder",
         "span_Lz": sim.span,
-        "z_periodic_tiling": f"z is periodic with period Lz = {sim.span}; "
-        "z in [0, 10] is covered by tiling",
+        "z_periodic_tiling": f"z is periodic with period Lz = {sim.span}; z in [0, 10] is covered by tiling",
         "warmup": cfg.warmup,
         "record": cfg.record,
         "frame_dt": cfg.frame_dt,
@@ -218,9 +206,7 @@ def write_dataset(cfg: GenerateConfig, state: RunState, out: Path, command: str)
     return diag
 
 
-def generate(
-    cfg: GenerateConfig, out: Path = DEFAULT_OUT, run_dir: Path = DEFAULT_RUN_DIR, device="cpu"
-) -> dict:
+def generate(cfg: GenerateConfig, out: Path = DEFAULT_OUT, run_dir: Path = DEFAULT_RUN_DIR, device="cpu") -> dict:
     _, state = simulate(cfg, run_dir, device)
     command = "python -m flownav.cfd " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     return write_dataset(cfg, state, out, command)

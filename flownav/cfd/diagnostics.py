@@ -55,9 +55,7 @@ def rms_w(velocity: np.ndarray) -> float:
 
 def spanwise_wavelength(w: np.ndarray, dz: float) -> tuple[float, list[float]]:
     """Dominant spanwise wavelength of ``w[..., Nz]`` (periodic z), and energy shares of k >= 1."""
-    spec = (np.abs(np.fft.rfft(np.asarray(w, dtype=np.float64), axis=-1)) ** 2).reshape(
-        -1, w.shape[-1] // 2 + 1
-    )
+    spec = (np.abs(np.fft.rfft(np.asarray(w, dtype=np.float64), axis=-1)) ** 2).reshape(-1, w.shape[-1] // 2 + 1)
     energy = spec.mean(0)[1:]
     k = int(np.argmax(energy)) + 1
     return float(w.shape[-1] * dz / k), (energy / energy.sum()).round(4).tolist()

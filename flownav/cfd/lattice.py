@@ -39,9 +39,7 @@ class Lattice:
 
 def _make(name: str) -> Lattice:
     # Weight by the number of non-zero components: rest, faces, edges, corners.
-    weights = {"D3Q19": (1 / 3, 1 / 18, 1 / 36, 0.0), "D3Q27": (8 / 27, 2 / 27, 1 / 54, 1 / 216)}[
-        name
-    ]
+    weights = {"D3Q19": (1 / 3, 1 / 18, 1 / 36, 0.0), "D3Q27": (8 / 27, 2 / 27, 1 / 54, 1 / 216)}[name]
     cs, ws = [], []
     for ci in itertools.product((0, 1, -1), repeat=3):
         wi = weights[sum(a != 0 for a in ci)]
@@ -58,6 +56,15 @@ def get_lattice(name: str) -> Lattice:
     if name not in LATTICES:
         raise ValueError(f"unknown lattice {name!r}; choose one of {sorted(LATTICES)}")
     return LATTICES[name]
+
+
+def shear_coefficients(ci) -> list[int]:
+    """Coefficients of the second-moment components (xx, yy, zz, xy, xz, yz) in c.P.c.
+
+    Off-diagonal terms are counted twice; the KBC shear part of population i is
+    (9/2) w_i sum_k coeffs_k P_k, in torch (collision.py) and in the generated C (ckernel.py).
+    """
+    return [ci[0] ** 2, ci[1] ** 2, ci[2] ** 2, 2 * ci[0] * ci[1], 2 * ci[0] * ci[2], 2 * ci[1] * ci[2]]
 
 
 def equilibrium(lat: Lattice, rho: Tensor, u: Tensor) -> Tensor:

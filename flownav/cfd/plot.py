@@ -51,10 +51,7 @@ def plot_wake(dataset: Path, out_dir: Path, frame: int = 0) -> list[Path]:
     wz = grad[..., 1, 0] - grad[..., 0, 1]
     out_dir.mkdir(parents=True, exist_ok=True)
     d, p = meta["diagnostics"], meta["provenance"]
-    title = (
-        f"Re = {p['Re']:g}, St = {d['St']:.3f}, mean Cd = {d['Cd_mean']:.3f}, "
-        f"rms w/U = {d['rms_w_near_wake']:.3f}"
-    )
+    title = f"Re = {p['Re']:g}, St = {d['St']:.3f}, mean Cd = {d['Cd_mean']:.3f}, rms w/U = {d['rms_w_near_wake']:.3f}"
 
     # ---- slice + histories -------------------------------------------------------------
     fig = plt.figure(figsize=(10, 9))
@@ -124,8 +121,7 @@ def plot_wake(dataset: Path, out_dir: Path, frame: int = 0) -> list[Path]:
     ax.set_zlabel("z / D")
     ax.view_init(elev=35, azim=-60)
     fig.suptitle(
-        f"Q > {thr} (U/D)$^2$ coloured by $\\omega_z$ (span Lz = {lz:g} tiled over z in [0, 10])\n"
-        + title,
+        f"Q > {thr} (U/D)$^2$ coloured by $\\omega_z$ (span Lz = {lz:g} tiled over z in [0, 10])\n" + title,
         fontsize=10,
     )
     fig.colorbar(sc, cax=fig.add_axes([0.93, 0.25, 0.015, 0.45]), label=r"$\omega_z D/U$")

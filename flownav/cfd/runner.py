@@ -4,7 +4,6 @@ a tqdm progress bar, and atomic checkpoints so a killed run resumes where it sto
 from __future__ import annotations
 
 import math
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -14,6 +13,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from flownav.atomic import atomic_write
 from flownav.cfd.solver import CylinderLBM
 
 
@@ -43,10 +43,8 @@ class RunState:
 
 
 def save_checkpoint(path: Path, sim: CylinderLBM, run: RunState) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save({"sim": sim.state_dict(), "run": run.__dict__}, tmp)
-    os.replace(tmp, path)  # atomic: a kill mid-write leaves the previous checkpoint intact
+    # Atomic: a kill mid-write leaves the previous checkpoint intact.
+    atomic_write(path, lambda f: torch.save({"sim": sim.state_dict(), "run": run.__dict__}, f))
 
 
 def load_checkpoint(path: Path, sim: CylinderLBM) -> RunState:
@@ -109,9 +107,7 @@ def run(
     c = sim.c
     n_end = math.ceil(t_end / cfg.dt)
     last_ckpt = time.time()
-    bar = tqdm(
-        total=n_end, initial=sim.steps, desc=desc, unit="step", mininterval=5.0, smoothing=0.05
-    )
+    bar = tqdm(total=n_end, initial=sim.steps, desc=desc, unit="step", mininterval=5.0, smoothing=0.05)
     while sim.steps < n_end:
         t0 = time.time()
         sim.step(min(k_sample - sim.steps % k_sample, n_end - sim.steps))

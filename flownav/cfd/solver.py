@@ -56,17 +56,11 @@ class SimConfig:
                 f"> {MAX_GRID_RE}; use cells_per_d >= {math.ceil(self.re / MAX_GRID_RE)}"
             )
         if self.cells_per_d < 4:
-            raise ValueError(
-                f"cells_per_d = {self.cells_per_d} cannot resolve the cylinder; use >= 4"
-            )
+            raise ValueError(f"cells_per_d = {self.cells_per_d} cannot resolve the cylinder; use >= 4")
         if self.tau - 0.5 < 1e-4:
-            raise ValueError(
-                f"tau = {self.tau:.6f} too close to 1/2; raise cells_per_d or u_lattice"
-            )
+            raise ValueError(f"tau = {self.tau:.6f} too close to 1/2; raise cells_per_d or u_lattice")
         if not (self.x_range[0] <= -2 and self.x_range[1] >= 4 and self.y_half >= 2):
-            raise ValueError(
-                f"domain x {self.x_range}, |y| <= {self.y_half} too small around the cylinder"
-            )
+            raise ValueError(f"domain x {self.x_range}, |y| <= {self.y_half} too small around the cylinder")
 
     @property
     def dx(self) -> float:
@@ -149,9 +143,7 @@ class Grid:
 class CylinderLBM:
     """D3Q19/D3Q27 KBC lattice Boltzmann for the cylinder wake; ``step(n)`` advances n steps."""
 
-    def __init__(
-        self, cfg: SimConfig, device="cpu", backend: str = "auto", threads: int | None = None
-    ):
+    def __init__(self, cfg: SimConfig, device="cpu", backend: str = "auto", threads: int | None = None):
         self.cfg = cfg
         self.threads = threads or torch.get_num_threads()
         self.device = torch.device(device)
@@ -167,9 +159,7 @@ class CylinderLBM:
         g = self.grid
         self.shifts = [g.shift(c) for c in self.lat.c]
         center = (-cfg.x_range[0] / cfg.dx, cfg.y_half / cfg.dx)  # cylinder at (0, 0)
-        self.links = boundaries.cylinder_links(
-            self.lat, g, center, 0.5 * cfg.cells_per_d, self.device
-        )
+        self.links = boundaries.cylinder_links(self.lat, g, center, 0.5 * cfg.cells_per_d, self.device)
         sponge_cells = round(cfg.sponge / cfg.dx)
         self.beta_x = boundaries.sponge_beta(g.nx, cfg.tau, sponge_cells).to(self.device)
         self.beta_b = self.beta_x[self.links.beta_index].contiguous()
@@ -199,11 +189,7 @@ class CylinderLBM:
         if cfg.span is not None:
             # Modes of spanwise wavelength Lz and ~1 D (A and B) plus noise seed 3D structure early.
             lz = cfg.span
-            span = (
-                1
-                + 0.5 * torch.sin(2 * math.pi * Z / lz)
-                + 0.5 * torch.sin(2 * math.pi * Z * round(lz) / lz)
-            )
+            span = 1 + 0.5 * torch.sin(2 * math.pi * Z / lz) + 0.5 * torch.sin(2 * math.pi * Z * round(lz) / lz)
             u[2] = cfg.perturb * bump * torch.sin(2 * math.pi * Z * round(lz) / lz)
         u[1] = cfg.perturb * bump * span
         u += 0.01 * cfg.perturb * torch.randn(u.shape, generator=gen) * (X > 0.5)
@@ -242,9 +228,7 @@ class CylinderLBM:
     def _stream_collide(self, fin: Tensor, fout: Tensor) -> None:
         g = self.grid
         if self.backend == "c":
-            ckernel.stream_collide(
-                self.cfg.lattice, fin, fout, self.beta_x, g.nx, g.nyg, g.nzg, g.pad, self.threads
-            )
+            ckernel.stream_collide(self.cfg.lattice, fin, fout, self.beta_x, g.nx, g.nyg, g.nzg, g.pad, self.threads)
             return
         p, m = g.pad, g.m
         pulled = [fin[i, p - s : p - s + m].view(g.nx, -1) for i, s in enumerate(self.shifts)]
@@ -264,9 +248,7 @@ class CylinderLBM:
         flat = fin.view(-1)
         block = flat[lk.pull]  # [Q, B] pulled populations of the boundary nodes
         fa = flat[lk.src_a]
-        bounced = (
-            lk.coef[:, 0] * fa + lk.coef[:, 1] * flat[lk.src_b] + lk.coef[:, 2] * flat[lk.src_c]
-        )
+        bounced = lk.coef[:, 0] * fa + lk.coef[:, 1] * flat[lk.src_b] + lk.coef[:, 2] * flat[lk.src_c]
         block.view(-1)[lk.target] = bounced
         # Each link carries f_i to the wall and returns the bounced value: momentum c_i (f + f~).
         self.force = ((fa + bounced)[:, None] * lk.c_link).sum(0)

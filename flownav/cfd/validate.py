@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from flownav.atomic import atomic_write_text
 from flownav.cfd.diagnostics import force_stats
 from flownav.cfd.runner import run
 from flownav.cfd.solver import CylinderLBM, SimConfig
@@ -30,9 +31,7 @@ REF_3D = {"St": 0.203, "St_tol": 0.07, "Cd": 1.27, "Cd_tol": 0.12, "rms_w_min": 
 def config_2d(cells_per_d: int | None = None) -> SimConfig:
     # Larger than the 3D box (inflow 15 D upstream, lateral period 30 D): the 2D reference
     # values are for an unbounded flow, and blockage raises Cd by ~ twice the blockage ratio.
-    return SimConfig(
-        re=100.0, cells_per_d=cells_per_d or 10, span=None, x_range=(-15.0, 25.0), y_half=15.0
-    )
+    return SimConfig(re=100.0, cells_per_d=cells_per_d or 10, span=None, x_range=(-15.0, 25.0), y_half=15.0)
 
 
 def _check(value: float, ref: float, tol: float) -> dict:
@@ -46,9 +45,7 @@ def _check(value: float, ref: float, tol: float) -> dict:
     }
 
 
-def validate_2d(
-    run_dir: Path, cells_per_d: int | None = None, device="cpu", t_end=140.0, t_stats=60.0
-) -> dict:
+def validate_2d(run_dir: Path, cells_per_d: int | None = None, device="cpu", t_end=140.0, t_stats=60.0) -> dict:
     cfg = config_2d(cells_per_d)
     sim = CylinderLBM(cfg, device=device)
     state = run(sim, t_end, run_dir / "state.pt", desc="2D Re=100")
@@ -73,8 +70,7 @@ def validate_3d(dataset: Path) -> dict:
     d = flow.meta["diagnostics"]
     p = flow.meta["provenance"]
     return {
-        "source": f"diagnostics of {dataset}/meta.json (not re-run; produced by: "
-        f"{p.get('command')})",
+        "source": f"diagnostics of {dataset}/meta.json (not re-run; produced by: {p.get('command')})",
         "provenance": {
             k: p.get(k)
             for k in (
@@ -142,10 +138,7 @@ def validate(dataset: Path, out: Path, run_dir: Path, cells_per_d=None, device="
         "checks": checks,
         "all_passed": all(checks.values()),
     }
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
-    tmp.write_text(json.dumps(result, indent=2, default=_json_default))
-    os.replace(tmp, out)
+    atomic_write_text(out, json.dumps(result, indent=2, default=_json_default))
     return result
 
 

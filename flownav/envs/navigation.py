@@ -22,7 +22,7 @@ from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from flownav.envs.kinematics import body_frame, heading_vector, move, turn, wrap_angle
-from flownav.envs.observations import State, check_views, compute_views, observation_size
+from flownav.envs.observations import State, check_views, compute_views, needs_body_frame, observation_size
 from flownav.envs.reward import RewardConfig, step_reward
 from flownav.envs.tasks import RegionTask
 from flownav.flows.base import FlowField
@@ -84,6 +84,7 @@ class NavigationEnv(EnvBase):
             )
         super().__init__(device=device, batch_size=torch.Size([num_envs]))
         self.views = check_views(views)
+        self._ego = needs_body_frame(self.views)
         self.angle = math.radians(misalignment_deg)
         self.rotation_center = tuple(rotation_center)
         base = flow.to(self.device)
@@ -253,7 +254,7 @@ class NavigationEnv(EnvBase):
             flow=self.flow_vel,
             theta=self.theta,
             psi=self.psi,
-            frame=body_frame(self.theta, self.psi),
+            frame=body_frame(self.theta, self.psi) if self._ego else None,  # skipped for geo-only runs
         )
         data = compute_views(state, self.views)
         data.update(

@@ -25,7 +25,7 @@ class State:
     flow: Tensor  # local flow velocity, inertial frame
     theta: Tensor
     psi: Tensor
-    frame: Tensor  # body frame [N, 3, 3]
+    frame: Tensor | None  # body frame [N, 3, 3]; None when no ego view is asked for
 
 
 def _geo(s: State, vel: Tensor) -> Tensor:
@@ -42,6 +42,10 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "geo_flow": (8, lambda s: _geo(s, s.flow)),
     "ego_flow": (6, lambda s: _ego(s, s.flow)),
 }
+
+
+def needs_body_frame(names) -> bool:
+    return any(name.startswith("ego") for name in names)
 
 
 def check_views(names) -> tuple[str, ...]:

@@ -198,20 +198,16 @@ class Suite:
                 ep = self.rollout(pol, flow, spec.task, env_cfg, spec.episodes)
                 results[pol][_angle_key(angle)] = summarize(ep.status, ep.time)
                 self.log(f"[{name}] {pol} {angle:g} deg: {_fmt(results[pol][_angle_key(angle)])}")
-        figures = []
-        if results:
-            from flownav.viz.plots import plot_sweep
-
-            figures = [
-                plot_sweep(
-                    results,
-                    angles,
-                    self.figures_dir / f"{name}.png",
-                    xlabel="misalignment angle (deg)",
-                    title=out["title"],
-                )
-            ]
+        figures = self._sweep_figure(name, results, angles, "misalignment angle (deg)", out["title"])
         return {"angles": angles, "results": results, "figures": figures}
+
+    def _sweep_figure(self, name, results, xs, xlabel, title, **kwargs) -> list:
+        """Success against the swept value, one curve per policy (no figure when nothing ran)."""
+        if not results:
+            return []
+        from flownav.viz.plots import plot_sweep
+
+        return [plot_sweep(results, xs, self.figures_dir / f"{name}.png", xlabel=xlabel, title=title, **kwargs)]
 
     def _run_ratio_sweep(self, name, spec, out) -> dict:
         """Success against U_swim,max / V_flow,max, reached by scaling the flow's speed (as the paper does)."""
@@ -229,20 +225,7 @@ class Suite:
                 ep = self.rollout(pol, flow, spec.task, env_cfg, spec.episodes)
                 results[pol][_ratio_key(ratio)] = summarize(ep.status, ep.time) | {"flow_speed_scale": scale}
                 self.log(f"[{name}] {pol} ratio {ratio:.3f}: {_fmt(results[pol][_ratio_key(ratio)])}")
-        figures = []
-        if results:
-            from flownav.viz.plots import plot_sweep
-
-            figures = [
-                plot_sweep(
-                    results,
-                    ratios,
-                    self.figures_dir / f"{name}.png",
-                    xlabel="U_swim,max / V_flow,max",
-                    title=out["title"],
-                    keyfn=_ratio_key,
-                )
-            ]
+        figures = self._sweep_figure(name, results, ratios, "U_swim,max / V_flow,max", out["title"], keyfn=_ratio_key)
         return {
             "ratios": ratios,
             "flow_speed_scales": scales,

@@ -10,6 +10,7 @@ import subprocess
 import time
 from pathlib import Path
 
+from flownav.atomic import atomic_write_text
 from flownav.paths import REPO_ROOT
 
 TARGETS = (
@@ -56,10 +57,7 @@ def merge_results(path: Path, new: dict, prov: dict) -> dict:
     for name, res in new.items():
         experiments[name] = res | {"provenance": prov}
     data = {"format": "flownav-paper-results-v1", "experiments": experiments}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(data, indent=1, default=_json_default))
-    os.replace(tmp, path)
+    atomic_write_text(path, json.dumps(data, indent=1, default=_json_default))
     return data
 
 
@@ -257,10 +255,7 @@ def write_report(data: dict, path: Path, command: str, seconds: float | None = N
         if r.get("notes"):
             lines += [f"- {n}" for n in r["notes"]] + [""]
         lines += _figures(r, report_dir)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".md.tmp")
-    tmp.write_text("\n".join(lines) + "\n")
-    os.replace(tmp, path)
+    atomic_write_text(path, "\n".join(lines) + "\n")
     return path
 
 
