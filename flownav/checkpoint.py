@@ -84,6 +84,18 @@ def find_resume_checkpoint(resume) -> Path:
     return path
 
 
+def load_resume_checkpoint(resume, expect_obs: str) -> tuple[Path, dict]:
+    """The checkpoint ``resume=`` names (path, payload), refused (a config error) if it was trained on another view."""
+    path = find_resume_checkpoint(resume)
+    payload = load_checkpoint(path)
+    if payload["obs"] != expect_obs:
+        raise ConfigError(
+            f"resume={resume}: that run trained a {payload['role']} on {payload['obs']!r} observations but this "
+            f"config asks for {expect_obs!r}; resume with the same obs (obs={payload['obs']})"
+        )
+    return path, payload
+
+
 def load_policy(path, expect_obs: str | None = None, device="cpu") -> tuple[DeterministicPolicy, dict]:
     """Rebuild the deterministic policy of a checkpoint; refuse one that reads another view."""
     payload = load_checkpoint(path)

@@ -42,9 +42,8 @@ from flownav.agents.networks import DeterministicPolicy
 from flownav.builders import ConfigError, build_env, build_flow, build_task
 from flownav.checkpoint import (
     atomic_torch_save,
-    find_resume_checkpoint,
-    load_checkpoint,
     load_policy,
+    load_resume_checkpoint,
     save_policy_checkpoint,
 )
 from flownav.envs.navigation import Status
@@ -170,13 +169,7 @@ def train(cfg, run_dir) -> dict:
     ckpt_dir = run_dir / "checkpoints"
     iteration, frames, wall_offset, history = 0, 0, 0.0, []
     if cfg.get("resume"):
-        path = find_resume_checkpoint(cfg.resume)
-        payload = load_checkpoint(path)
-        if payload["obs"] != student_view:
-            raise ConfigError(
-                f"resume={cfg.resume}: that run trained a student on {payload['obs']!r} but this config asks for "
-                f"{student_view!r}; resume with obs={payload['obs']}"
-            )
+        path, payload = load_resume_checkpoint(cfg.resume, expect_obs=student_view)
         st = payload["train_state"]
         student.load_state_dict(payload["policy"]["state_dict"])
         optim.load_state_dict(st["optimizer"])

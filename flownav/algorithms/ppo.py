@@ -34,7 +34,7 @@ from torchrl.objectives.value import GAE
 
 from flownav.agents.networks import ACTIVATIONS, DeterministicPolicy, ObsNormalizer, mlp
 from flownav.builders import ConfigError, build_env, build_flow, build_task
-from flownav.checkpoint import find_resume_checkpoint, load_checkpoint, save_policy_checkpoint
+from flownav.checkpoint import load_checkpoint, load_resume_checkpoint, save_policy_checkpoint
 from flownav.envs.navigation import NavigationEnv, Status
 from flownav.envs.observations import VIEWS, observation_size
 from flownav.runlog import RunLogger
@@ -255,13 +255,7 @@ def train(cfg, run_dir) -> dict:
     frames, iteration, wall_offset, best_success = 0, 0, 0.0, -1.0
     history_best = {}
     if cfg.resume:
-        path = find_resume_checkpoint(cfg.resume)
-        payload = load_checkpoint(path)
-        if payload["obs"] != obs_key:
-            raise ConfigError(
-                f"resume={cfg.resume}: that run trained a policy on {payload['obs']!r} observations but this config "
-                f"asks for {obs_key!r}; resume with the same obs (obs={payload['obs']})"
-            )
+        path, payload = load_resume_checkpoint(cfg.resume, expect_obs=obs_key)
         frames, iteration, wall_offset, best_success, history_best = restore_train_state(
             payload, policy, critic_net, optim, env
         )
