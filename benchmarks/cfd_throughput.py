@@ -45,9 +45,7 @@ def copy_bandwidth(n_floats: int, repeats: int = 10) -> float:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--steps", type=int, default=40)
     p.add_argument("--cells-per-d", type=int, default=SimConfig().cells_per_d)

@@ -11,7 +11,6 @@ and checkpoints exist, the shipped teacher and student on the real wake are time
 
 from __future__ import annotations
 
-import json
 import platform
 import sys
 import time
@@ -21,6 +20,9 @@ import torch
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from common import machine, write_result  # noqa: E402
 
 from flownav.agents import DeterministicPolicy  # noqa: E402
 from flownav.envs import NavigationEnv, RegionTask  # noqa: E402
@@ -39,8 +41,15 @@ def synthetic_wake(frames: int = 40, spacing: float = 0.2, span: float = 4.0) ->
     nx, ny, nz = round((hi[0] - lo[0]) / spacing) + 1, round((hi[1] - lo[1]) / spacing) + 1, round(span / spacing)
     g = torch.Generator().manual_seed(0)
     vel = 0.002 * torch.randn(frames, nx, ny, nz, 3, generator=g)
-    return GridFlow(vel, origin=lo, spacing=(spacing, spacing, spacing), dt=0.25, periodic=(False, False, True),
-                    bounds=WAKE_BOUNDS, obstacles=[Cylinder((0.0, 0.0), 0.5)])
+    return GridFlow(
+        vel,
+        origin=lo,
+        spacing=(spacing, spacing, spacing),
+        dt=0.25,
+        periodic=(False, False, True),
+        bounds=WAKE_BOUNDS,
+        obstacles=[Cylinder((0.0, 0.0), 0.5)],
+    )
 
 
 class Hover(torch.nn.Module):
@@ -80,8 +89,11 @@ def time_eval(policy, obs: str, flow, threads: int, episodes: int = EPISODES, ch
 
 
 def main() -> None:
-    out = {"goal": f"{EPISODES} episodes in <= {TARGET_S:.0f} s", "host": f"{platform.machine()}, "
-           f"{torch.get_num_threads()} default torch threads, torch {torch.__version__}", "runs": {}}
+    out = {
+        "goal": f"{EPISODES} episodes in <= {TARGET_S:.0f} s",
+        "host": f"{platform.machine()}, {torch.get_num_threads()} default torch threads, torch {torch.__version__}",
+        "runs": {},
+    }
     try:
         load = Path("/proc/loadavg").read_text().split()[:3]
         out["load_average_at_start"] = [float(x) for x in load]
@@ -116,10 +128,9 @@ def main() -> None:
         f"with 1 thread ({worst1['swimmer_steps_per_s']:,} swimmer-steps/s); goal <= {TARGET_S:.0f} s "
         f"({'met' if worst1['seconds'] <= TARGET_S else 'NOT met'}); fastest configuration: {best['seconds']:.1f} s"
     )
-    path = ROOT / "benchmarks" / "results" / "eval_throughput.json"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(out, indent=1))
-    print(out["headline"])
+    out["command"] = "python benchmarks/eval_throughput.py " + " ".join(sys.argv[1:])
+    out["machine"] = machine()
+    write_result("eval_throughput", out)
 
 
 if __name__ == "__main__":
