@@ -197,7 +197,7 @@ def test_generate_writes_a_loadable_periodic_dataset(tmp_path):
     from flownav.cfd.dataset import GenerateConfig, simulate, write_dataset
     from flownav.flows.grid import load_grid_flow
 
-    sim = SimConfig(re=100, cells_per_d=4, u_lattice=0.15, x_range=(-5, 17), y_half=6.5, span=2.0)
+    sim = SimConfig(re=100, cells_per_d=4, u_lattice=0.15, x_range=(-5, 26), y_half=7.5, span=2.0)
     cfg = GenerateConfig(
         sim=sim, warmup=12.0, record=14.0, frame_dt=0.5, out_spacing=0.5, min_periods=1
     )
@@ -205,8 +205,8 @@ def test_generate_writes_a_loadable_periodic_dataset(tmp_path):
     diag = write_dataset(cfg, state, tmp_path / "data", command="test")
     flow = load_grid_flow(tmp_path / "data")
     T, nx, ny, nz = flow.shape
-    assert (nx, ny, nz) == (41, 25, 4) and flow.periodic == (False, False, True)
-    assert flow.origin == (-4.0, -6.0, 0.0) and nz * flow.spacing[2] == pytest.approx(2.0)
+    assert (nx, ny, nz) == (53, 29, 4) and flow.periodic == (False, False, True)
+    assert flow.origin == (-4.0, -7.0, 0.0) and nz * flow.spacing[2] == pytest.approx(2.0)
     assert flow.meta["provenance"]["Re"] == 100 and "sha256" in flow.meta
     for key in ("St", "Cd_mean", "rms_w_near_wake", "loop_seam_jump", "window_periods"):
         assert np.isfinite(diag[key])

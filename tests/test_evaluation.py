@@ -66,12 +66,13 @@ def test_wilson_interval_known_values():
 
 # ----------------------------------------------------------------------------- exact counts, failure causes
 def test_exactly_n_episodes_and_pushed_out_of_the_domain():
-    """A uniform stream of 1.5 along +x carries motionless swimmers out through x = 16 at a known time."""
+    """A uniform stream of 1.5 along +x carries motionless swimmers out through the far x end at a known time."""
     flow = UniformFlow((1.5, 0.0, 0.0))
     ep = run_episodes(still([0.0, 0.0, 0.0]), "geo", env_factory(flow, RegionTask()), episodes=37, chunk_size=10)
     assert len(ep) == 37 and ep.start.shape == (37, 3)
     assert (ep.status == Status.LEFT_DOMAIN).all()
-    steps = torch.floor((16.0 - ep.start[:, 0]) / (1.5 * 0.2)) + 1  # first step with x > 16
+    x_end = WAKE_BOUNDS.hi[0]
+    steps = torch.floor((x_end - ep.start[:, 0]) / (1.5 * 0.2)) + 1  # first step with x > x_end
     assert torch.allclose(ep.time, steps * 0.2, atol=1e-4)
     s = summarize(ep.status, ep.time)
     assert s["episodes"] == 37 and s["successes"] == 0
@@ -365,3 +366,20 @@ def test_report_puts_the_paper_next_to_ours(tmp_path):
     assert "python evaluate.py +experiment=paper_training" in text and "+experiment=teacher" in text
     assert "Student in the training flow: 90.00% -> NOT met" in text
     assert json.loads((tmp_path / "paper.json").read_text())["experiments"]["training"]["provenance"]["commit"]
+
+
+def test_scripted_references_run_without_checkpoints(tiny_world):
+    """The suite's scripted references need no checkpoint; a passive tracer in still water never arrives."""
+    from flownav.evaluation.experiments import Suite
+
+    root, data, ck = tiny_world
+    cfg = compose_eval("+experiment=paper_training", *tiny_overrides(root, data, ck))
+    r = Suite(cfg, log=lambda *_: None).run("training", cfg.suite.training)
+    assert {"head_to_target", "passive"} <= set(r["results"]) and not r["missing"]
+    assert r["policies"]["passive"]["checkpoint"] == "scripted:passive"
+    calm_overrides = [o for o in tiny_overrides(root, data, ck) if not o.startswith("flow.")]
+    calm = compose_eval("+experiment=paper_training", *calm_overrides, "flow=uniform", "flow.velocity=[0,0,0]")
+    still = Suite(calm, log=lambda *_: None).run("training", calm.suite.training)["results"]["passive"]
+    assert still["failures"]["timeout"]["count"] == still["episodes"] == 24
+    with pytest.raises(ValueError, match="choose one of"):
+        Suite._scripted("mine", "wander")

@@ -20,10 +20,10 @@ import torch
 from flownav.cfd import diagnostics
 from flownav.cfd.runner import RunState, run
 from flownav.cfd.solver import CylinderLBM, SimConfig
-from flownav.flows.base import Box, Cylinder
+from flownav.flows.base import WAKE_BOUNDS, Cylinder
 from flownav.flows.grid import loop_seam_jump, save_grid_flow
 
-NAV_BOX = Box((-4.0, -6.0, 0.0), (16.0, 6.0, 10.0))
+NAV_BOX = WAKE_BOUNDS  # the stored grid covers the navigation box exactly
 DEFAULT_OUT = Path("data/cylinder_re300")
 DEFAULT_RUN_DIR = Path("runs/cfd/cylinder_re300")
 MAX_BYTES = 50_000_000  # the repository budget for velocity.npy
@@ -54,8 +54,11 @@ class GenerateConfig:
             raise ValueError(f"out_spacing {self.out_spacing} must divide the span {self.sim.span}")
         lo, hi = NAV_BOX.lo, NAV_BOX.hi
         x0, x1 = self.sim.x_range
-        if not (x0 < lo[0] and x1 > hi[0] and self.sim.y_half > hi[1]):
-            raise ValueError(f"the lattice x {self.sim.x_range}, |y| < {self.sim.y_half} must contain {NAV_BOX}")
+        if not (x0 < lo[0] and x1 - self.sim.sponge > hi[0] and self.sim.y_half > hi[1]):
+            raise ValueError(
+                f"the lattice x {self.sim.x_range} (outlet sponge {self.sim.sponge} D), |y| < {self.sim.y_half} "
+                f"must contain {NAV_BOX} ahead of the sponge; widen --x-range / --y-half"
+            )
 
 
 def output_axes(cfg: GenerateConfig):

@@ -33,10 +33,10 @@ class SimConfig:
     re: float = 300.0
     cells_per_d: int = 12  # 10 gave Cd +12% and a weaker 3D wake; 12 fits the time budget
     u_lattice: float = 0.1
-    x_range: tuple[float, float] = (-8.0, 22.0)  # inflow 8 D upstream, outflow 6 D past x = 16
-    y_half: float = 8.0  # lateral period 16 D (periodic, 2 D beyond the navigation box)
+    x_range: tuple[float, float] = (-8.0, 28.0)  # inflow 8 D upstream, outflow 6 D past x = 22
+    y_half: float = 9.0  # lateral period 18 D (periodic, 2 D beyond the navigation box)
     span: float | None = 4.0  # periodic span Lz (mode A ~4 D, mode B ~1 D); None = a 2D run
-    sponge: float = 3.0  # outlet sponge length: x in [19, 22] by default
+    sponge: float = 3.0  # outlet sponge length: x in [25, 28] by default
     lattice: str = "D3Q19"
     perturb: float = 0.1  # amplitude of the initial asymmetric, span-modulated kick
     seed: int = 0

@@ -29,6 +29,7 @@ from flownav.builders import build_env, build_flow, build_task
 from flownav.checkpoint import CheckpointError, load_policy
 from flownav.evaluation.metrics import subregion_counts, summarize
 from flownav.evaluation.rollout import run_episodes
+from flownav.evaluation.scripted import SCRIPTED
 from flownav.flows.grid import GridFlowError
 from flownav.paths import resolve
 
@@ -83,6 +84,9 @@ class Suite:
             entry = self.cfg.policies.get(name)
             if entry is None:
                 raise KeyError(f"unknown policy {name!r}; the config's policies are {sorted(self.cfg.policies)}")
+            if entry.get("scripted"):
+                self._policies[name] = self._scripted(name, str(entry.scripted))
+                return self._policies[name]
             path = resolve(str(entry.checkpoint))
             if not path.is_file():
                 raise Missing(f"missing checkpoint {entry.checkpoint}: run `{entry.command}`")
@@ -99,6 +103,13 @@ class Suite:
             }
             self._policies[name] = (policy, payload["obs"], info)
         return self._policies[name]
+
+    @staticmethod
+    def _scripted(name: str, kind: str):
+        if kind not in SCRIPTED:
+            raise ValueError(f"policies.{name}.scripted is {kind!r}; choose one of {sorted(SCRIPTED)}")
+        info = {"checkpoint": f"scripted:{kind}", "sha256": "-", "obs": "geo", "role": "reference"}
+        return SCRIPTED[kind](), "geo", info
 
     def make_env_factory(self, flow, task_cfg, env_cfg, views, seed: int):
         task = build_task(task_cfg, flow)

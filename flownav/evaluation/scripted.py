@@ -50,6 +50,17 @@ class HeadToTarget(nn.Module):
         return torch.stack((speed, dtheta, dpsi), -1)
 
 
+class Passive(nn.Module):
+    """No swimming, no turning: a passive tracer of the flow (the floor any navigator must beat)."""
+
+    def forward(self, obs: Tensor) -> Tensor:
+        return obs.new_zeros(obs.shape[:-1] + (3,))
+
+
+# Scripted reference policies the evaluation suite can name (``policies.<name>.scripted``); all read the geo view.
+SCRIPTED = {"head_to_target": HeadToTarget, "passive": Passive}
+
+
 def random_geo_obs(n: int, generator: torch.Generator | None = None, scale: float = 12.0) -> Tensor:
     """Geo observations with target distances log-uniform in [0.1, scale] (dense near the target)."""
     direction = torch.randn(n, 3, generator=generator)

@@ -67,7 +67,9 @@ def obstacle_from_dict(d: dict) -> Cylinder:
 
 
 # The navigation domain of the cylinder wake (cylinder of diameter 1 at x = y = 0, axis z).
-WAKE_BOUNDS = Box((-4.0, -6.0, 0.0), (16.0, 6.0, 10.0))
+# It reaches 10 D past the training regions (x in [8, 12]) and 3 D beyond them in y: a swimmer
+# swept downstream while it turns into the wake still has room to work back upstream.
+WAKE_BOUNDS = Box((-4.0, -7.0, 0.0), (22.0, 7.0, 10.0))
 
 
 class FlowField:
