@@ -82,9 +82,9 @@ def test_exactly_n_episodes_and_pushed_out_of_the_domain():
 def test_short_episodes_are_not_over_counted():
     """Half the swimmers leave fast, half time out: each slot still counts once (no auto-reset)."""
     flow = FunctionFlow(
-        lambda p, t: torch.stack((torch.where(p[:, 1] > 3, 2.0, 0.0), 0 * p[:, 1], 0 * p[:, 2]), -1),
-        bounds=WAKE_BOUNDS,
-        max_speed=2.0,
+        lambda p, t: torch.stack((torch.where(p[:, 1] > 3, 3.0, 0.0), 0 * p[:, 1], 0 * p[:, 2]), -1),
+        bounds=WAKE_BOUNDS,  # at speed 3, x from [8, 12] leaves through x = 22 within the 6 time units
+        max_speed=3.0,
     )
     task = RegionTask(Box((8.0, 2.0, 3.0), (12.0, 4.0, 7.0)), Box((8.0, -4.0, 3.0), (12.0, -2.0, 7.0)))
     ep = run_episodes(still([0.0, 0.0, 0.0]), "geo", env_factory(flow, task, time_limit=6.0), episodes=500)
@@ -291,7 +291,7 @@ def test_missing_checkpoints_are_skipped_with_the_command(tiny_world, tmp_path):
         f"policies.baseline.checkpoint={ck['baseline']}",
     )
     r = evaluate.run(cfg, log=lambda *_: None)["training"]
-    assert set(r["results"]) == {"student", "baseline"}
+    assert set(r["results"]) == {"student", "baseline", "head_to_target", "passive"}  # scripted ones need no file
     assert any("python train.py +experiment=teacher" in m for m in r["missing"])
     assert "python train.py +experiment=teacher" in (tmp_path / "R.md").read_text()
 

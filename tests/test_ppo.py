@@ -70,6 +70,11 @@ def test_ppo_learns_tiny_navigation(tmp_path):
     assert payload["role"] == "teacher" and policy.config["n_outputs"] == 6
     success = _success(policy, cfg)
     assert success > 0.8, f"PPO did not learn the tiny task: held-out success {success:.3f}"
+    # Periodic deterministic evaluation (every 10 of the 30 iterations) drives best.pt.
+    evals = [float(r["eval/success_rate"]) for r in rows(tmp_path) if r.get("eval/success_rate")]
+    assert len(evals) == 3 and evals[-1] > 0.7, evals
+    best = load_checkpoint(tmp_path / "checkpoints" / "best.pt")
+    assert best["meta"]["metrics"]["eval/success_rate"] == max(evals)
     with pytest.raises(CheckpointError, match="ego"):
         load_policy(tmp_path / "checkpoints" / "last.pt", expect_obs="ego")
 

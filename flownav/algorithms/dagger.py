@@ -28,7 +28,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import shutil
 import time
 from pathlib import Path
 
@@ -39,6 +38,7 @@ from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.data.replay_buffers.samplers import RandomSampler
 
 from flownav.agents.networks import DeterministicPolicy
+from flownav.atomic import atomic_copy, atomic_write_text
 from flownav.builders import ConfigError, build_env, build_flow, build_task
 from flownav.checkpoint import (
     atomic_torch_save,
@@ -287,12 +287,8 @@ def train(cfg, run_dir) -> dict:
             "final": final,
             "curve": curve,
         }
-        path.write_text(json.dumps(record, indent=1, default=str))
+        atomic_write_text(path, json.dumps(record, indent=1, default=str))
     if cfg.get("output_checkpoint"):
-        out = resolve(str(cfg.output_checkpoint))
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.with_name(out.name + ".tmp")
-        shutil.copyfile(ckpt_dir / "last.pt", tmp)
-        tmp.replace(out)
+        out = atomic_copy(ckpt_dir / "last.pt", resolve(str(cfg.output_checkpoint)))
         final["output_checkpoint"] = str(out)
     return final

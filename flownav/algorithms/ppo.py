@@ -18,7 +18,6 @@ that collected it (the first-epoch ratio is exactly 1) and the next batch uses t
 
 from __future__ import annotations
 
-import math
 import time
 from pathlib import Path
 
@@ -33,10 +32,13 @@ from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
 from flownav.agents.networks import ACTIVATIONS, DeterministicPolicy, ObsNormalizer, mlp
+from flownav.atomic import atomic_copy
 from flownav.builders import ConfigError, build_env, build_flow, build_task
 from flownav.checkpoint import load_checkpoint, load_resume_checkpoint, save_policy_checkpoint
 from flownav.envs.navigation import NavigationEnv, Status
 from flownav.envs.observations import VIEWS, observation_size
+from flownav.evaluation.rollout import run_episodes
+from flownav.paths import resolve
 from flownav.runlog import RunLogger
 
 LOSS_CRITIC_TYPES = ("l1", "l2", "smooth_l1")
@@ -117,6 +119,9 @@ def check_config(cfg) -> None:
             raise ConfigError(f"algo.{key} must be in (0, 1], got {a[key]}")
     if not 0.0 < a.clip_epsilon < 1.0:
         raise ConfigError(f"algo.clip_epsilon must be in (0, 1), got {a.clip_epsilon}")
+    for key in ("eval_every", "eval_episodes", "final_eval_episodes"):
+        if int(a.get(key) or 0) < 0:
+            raise ConfigError(f"algo.{key} must be >= 0 (0 = off), got {a[key]}")
     if a.entropy_coeff < 0 or a.critic_coeff < 0:
         raise ConfigError("algo.entropy_coeff and algo.critic_coeff must be >= 0")
     if a.loss_critic_type not in LOSS_CRITIC_TYPES:
@@ -138,39 +143,16 @@ def check_config(cfg) -> None:
 
 
 # ----------------------------------------------------------------------------- evaluation
-@torch.no_grad()
 def evaluate_policy(policy, make_env, obs_key: str, episodes: int, chunk: int = 10_000) -> dict:
-    """Deterministic rollouts: exactly ``episodes`` episodes, one per env slot, no auto-reset.
-
-    ``make_env(num_envs, seed_offset)`` builds a fresh env; each slot runs until its first
-    ``done`` and its status then is the episode's outcome.
-    """
-    statuses, times = [], []
-    done_so_far = 0
-    while done_so_far < episodes:
-        n = min(chunk, episodes - done_so_far)
-        env: NavigationEnv = make_env(n, done_so_far)
-        td = env.reset()
-        status = torch.zeros(n, dtype=torch.int64)
-        t_end = torch.full((n,), math.nan)
-        finished = torch.zeros(n, dtype=torch.bool)
-        while not finished.all():
-            td["action"] = policy(td[obs_key])
-            td = env.step(td)["next"]
-            new = td["done"].reshape(-1) & ~finished
-            status = torch.where(new, td["status"].reshape(-1), status)
-            t_end = torch.where(new, td["time"].reshape(-1), t_end)
-            finished |= new
-        statuses.append(status)
-        times.append(t_end)
-        done_so_far += n
-    status, t_end = torch.cat(statuses), torch.cat(times)
-    success = status == Status.SUCCESS
-    out = {"episodes": int(status.numel()), "success_rate": float(success.float().mean())}
-    out["mean_success_time"] = float(t_end[success].mean()) if success.any() else None
+    """Deterministic rollouts (:func:`flownav.evaluation.rollout.run_episodes`): exactly ``episodes``
+    episodes, one per env slot, no auto-reset. ``make_env(num_envs, chunk_index)`` builds a fresh env."""
+    ep = run_episodes(policy, obs_key, make_env, episodes, chunk)
+    success = ep.success
+    out = {"episodes": len(ep), "success_rate": float(success.float().mean())}
+    out["mean_success_time"] = float(ep.time[success].mean()) if success.any() else None
     for s in Status:
         if s not in (Status.RUNNING, Status.SUCCESS):
-            out[f"rate_{s.name.lower()}"] = float((status == s).float().mean())
+            out[f"rate_{s.name.lower()}"] = float((ep.status == s).float().mean())
     return out
 
 
@@ -223,6 +205,7 @@ def train(cfg, run_dir) -> dict:
     role = str(cfg.get("role") or ("teacher" if obs_key.startswith("geo") else "baseline"))
     target_success = float(a.target_success)
     eval_episodes = int(a.final_eval_episodes)
+    eval_every, periodic_eval_episodes = int(a.get("eval_every") or 0), int(a.get("eval_episodes") or 0)
 
     torch.manual_seed(seed)
     flow = build_flow(cfg.flow, device=cfg.device)
@@ -302,6 +285,16 @@ def train(cfg, run_dir) -> dict:
             "metrics": metrics,
         }
         return save_policy_checkpoint(ckpt_dir / name, policy, obs_key, role, meta=meta, train_state=train_state)
+
+    def evaluate(episodes: int, seed_base: int) -> dict:
+        """Deterministic episodes of a copy of the current policy (its mean action), on fresh envs."""
+        eval_policy = DeterministicPolicy(**policy.config)
+        eval_policy.load_state_dict(policy.state_dict())
+
+        def make_env(n, chunk):
+            return build_env(cfg.env, flow, task, [obs_key], num_envs=n, seed=seed_base + seed + 7919 * chunk)
+
+        return evaluate_policy(eval_policy.eval(), make_env, obs_key, episodes)
 
     # Per-slot running episode returns (an episode spans batches).
     ep_return = torch.zeros(num_envs)
@@ -395,12 +388,24 @@ def train(cfg, run_dir) -> dict:
                     "lr": optim.param_groups[0]["lr"],
                 }
                 window_returns, window_success, window_times = [], [], []
-                if time_to_target is None and n_eps and succ >= target_success:
+                # The success that counts: deterministic held-out episodes when periodic evaluation is on,
+                # else the training episodes of the stochastic policy.
+                score = succ if n_eps else float("nan")
+                if eval_every and periodic_eval_episodes and (iteration % eval_every == 0 or frames >= total_frames):
+                    t_eval = time.time()
+                    res = evaluate(periodic_eval_episodes, 20_000_003)
+                    score = res["success_rate"]
+                    metrics["eval/success_rate"] = score
+                    metrics["eval/mean_success_time"] = res["mean_success_time"] or float("nan")
+                    metrics["perf/eval_s"] = time.time() - t_eval
+                elif eval_every:
+                    score = float("nan")  # best.pt and the time to target follow the periodic evaluation only
+                if time_to_target is None and score >= target_success:
                     time_to_target = logger.elapsed
                     metrics["perf/minutes_to_target"] = time_to_target / 60
                 logger.log(frames, metrics)
-                if n_eps and succ > best_success:
-                    best_success = succ
+                if score > best_success:
+                    best_success = score
                     history_best = {"frames": frames, **metrics}
                     save("best.pt", metrics)
             if checkpoint_every and iteration % checkpoint_every == 0:
@@ -413,28 +418,19 @@ def train(cfg, run_dir) -> dict:
         "frames": frames,
         "iterations": iteration,
         "wall_time_s": logger.elapsed,
-        "best_train_success": best_success,
+        "best_success": best_success,
+        "best_success_source": "eval" if eval_every and periodic_eval_episodes else "train",
     }
     final.update({k: v for k, v in metrics.items() if not isinstance(v, str)})
     if time_to_target is not None:
         final["minutes_to_target"] = time_to_target / 60
     if eval_episodes > 0:
-        eval_policy = DeterministicPolicy(**policy.config)
-        eval_policy.load_state_dict(policy.state_dict())
-
-        def make_env(n, offset):
-            return build_env(cfg.env, flow, task, [obs_key], num_envs=n, seed=10_000_019 + seed + offset)
-
-        res = evaluate_policy(eval_policy.eval(), make_env, obs_key, eval_episodes)
+        res = evaluate(eval_episodes, 10_000_019)
         final.update({f"eval/{k}": v for k, v in res.items()})
         logger.log(frames, {f"eval/{k}": v for k, v in res.items() if isinstance(v, int | float)})
     logger.summary(final)
     logger.close()
     if cfg.get("output_checkpoint"):
-        import shutil
-
-        out = Path(str(cfg.output_checkpoint))
-        out.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(ckpt_dir / "last.pt", out)
+        out = atomic_copy(ckpt_dir / "last.pt", resolve(str(cfg.output_checkpoint)))
         final["output_checkpoint"] = str(out)
     return final

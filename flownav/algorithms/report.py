@@ -57,8 +57,8 @@ def evaluate_checkpoint(path, episodes: int = 10_000, overrides=(), chunk: int =
     flow = build_flow(cfg.flow)
     task = build_task(cfg.task, flow)
 
-    def make_env(n, offset):
-        return build_env(cfg.env, flow, task, [obs], num_envs=n, seed=seed + offset)
+    def make_env(n, chunk):
+        return build_env(cfg.env, flow, task, [obs], num_envs=n, seed=seed + chunk)
 
     res = evaluate_policy(policy, make_env, obs, episodes, chunk=chunk)
     res.update(checkpoint=str(path), obs=obs, role=payload["role"], frames=payload.get("meta", {}).get("frames"))

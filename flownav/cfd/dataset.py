@@ -2,7 +2,7 @@
 
 The lattice nodes are aligned with the stored grid (``out_spacing`` is a multiple of the
 lattice spacing), so resampling is exact subsampling. The span Lz is periodic and stored once
-(``Nz * dz = Lz``); the navigation box z in [0, 10] is covered by tiling it (``periodic`` z).
+(``Nz * dz = Lz``); the navigation box z in [-5, 15] is covered by tiling it (``periodic`` z).
 """
 
 from __future__ import annotations
@@ -183,7 +183,10 @@ def write_dataset(cfg: GenerateConfig, state: RunState, out: Path, command: str)
         },
         "boundaries": "inflow equilibrium u=U, outflow rho=1 + sponge, periodic y and z, Bouzidi cylinder",
         "span_Lz": sim.span,
-        "z_periodic_tiling": f"z is periodic with period Lz = {sim.span}; z in [0, 10] is covered by tiling",
+        "z_periodic_tiling": (
+            f"z is periodic with period Lz = {sim.span}; "
+            f"z in [{NAV_BOX.lo[2]:g}, {NAV_BOX.hi[2]:g}] is covered by tiling"
+        ),
         "warmup": cfg.warmup,
         "record": cfg.record,
         "frame_dt": cfg.frame_dt,

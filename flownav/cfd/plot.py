@@ -3,7 +3,7 @@
 * ``wake_vorticity.png``: z-vorticity on the mid-span slice with the navigation regions,
   plus the force and spanwise-fluctuation histories of the run that produced it.
 * ``wake_q.png``: Q-criterion view, points with Q above a threshold coloured by omega_z
-  (scatter: no marching-cubes dependency), span tiled over the navigation box z in [0, 10].
+  (scatter: no marching-cubes dependency), span tiled over the navigation box in z.
 """
 
 from __future__ import annotations
@@ -121,7 +121,7 @@ def plot_wake(dataset: Path, out_dir: Path, frame: int = 0) -> list[Path]:
     ax.set_zlabel("z / D")
     ax.view_init(elev=35, azim=-60)
     fig.suptitle(
-        f"Q > {thr} (U/D)$^2$ coloured by $\\omega_z$ (span Lz = {lz:g} tiled over z in [0, 10])\n" + title,
+        f"Q > {thr} (U/D)$^2$ coloured by $\\omega_z$ (span Lz = {lz:g} tiled in z)\n" + title,
         fontsize=10,
     )
     fig.colorbar(sc, cax=fig.add_axes([0.93, 0.25, 0.015, 0.45]), label=r"$\omega_z D/U$")

@@ -68,8 +68,9 @@ def obstacle_from_dict(d: dict) -> Cylinder:
 
 # The navigation domain of the cylinder wake (cylinder of diameter 1 at x = y = 0, axis z).
 # It reaches 10 D past the training regions (x in [8, 12]) and 3 D beyond them in y: a swimmer
-# swept downstream while it turns into the wake still has room to work back upstream.
-WAKE_BOUNDS = Box((-4.0, -7.0, 0.0), (22.0, 7.0, 10.0))
+# swept downstream while it turns into the wake still has room to work back upstream. The span (z)
+# is periodic, so z limits are artificial walls: they sit 8 D above and below the regions (z in [3, 7]).
+WAKE_BOUNDS = Box((-4.0, -7.0, -5.0), (22.0, 7.0, 15.0))
 
 
 class FlowField:
