@@ -4,7 +4,7 @@ A checkpoint is a ``torch.save`` dict with ``format == "flownav-policy-v1"``:
 
 * ``policy``: the :class:`~flownav.agents.DeterministicPolicy` constructor config and
   ``state_dict`` (normaliser statistics included);
-* ``obs``: the observation view it reads (``geo``, ``ego``, ``geo_flow``, ``ego_flow``);
+* ``obs``: the observation view it reads (a key of ``flownav.envs.observations.VIEWS``);
 * ``role``: ``teacher``, ``baseline`` or ``student``; ``meta``: free (config, step, metrics);
 * ``train_state``: anything a resumed run needs (optimiser, step counters, RNG), optional.
 

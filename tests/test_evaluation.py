@@ -15,6 +15,7 @@ from hydra import compose, initialize_config_dir
 from flownav.agents import DeterministicPolicy
 from flownav.checkpoint import CheckpointError, save_policy_checkpoint
 from flownav.envs import NavigationEnv, RegionTask, Status
+from flownav.envs.observations import observation_size
 from flownav.evaluation.metrics import subregion_counts, summarize, wilson_interval
 from flownav.evaluation.rollout import run_episodes
 from flownav.evaluation.scripted import ACTION_LOW, HeadToTarget, action_high
@@ -195,8 +196,9 @@ def tiny_world(tmp_path_factory):
         ("student_symmetric", "ego", "student"),
         ("teacher_flowobs", "geo_flow", "teacher"),
         ("student_flowobs", "ego_flow", "student"),
+        ("student_up", "ego_up", "student"),
     ]:
-        pol = DeterministicPolicy(8 if view.startswith("geo") else 6, ACTION_LOW, action_high(), hidden=(16, 16))
+        pol = DeterministicPolicy(observation_size(view), ACTION_LOW, action_high(), hidden=(16, 16))
         ck[name] = save_policy_checkpoint(root / f"{name}.pt", pol, view, role)
     return root, data, ck
 
@@ -289,9 +291,10 @@ def test_missing_checkpoints_are_skipped_with_the_command(tiny_world, tmp_path):
         f"policies.teacher.checkpoint={tmp_path / 'none.pt'}",
         f"policies.student.checkpoint={ck['student']}",
         f"policies.baseline.checkpoint={ck['baseline']}",
+        f"policies.student_up.checkpoint={ck['student_up']}",
     )
     r = evaluate.run(cfg, log=lambda *_: None)["training"]
-    assert set(r["results"]) == {"student", "baseline", "head_to_target", "passive"}  # scripted ones need no file
+    assert set(r["results"]) == {"student", "baseline", "student_up", "head_to_target", "passive"}  # no teacher file
     assert any("python train.py +experiment=teacher" in m for m in r["missing"])
     assert "python train.py +experiment=teacher" in (tmp_path / "R.md").read_text()
 

@@ -48,7 +48,7 @@ class NavigationEnv(EnvBase):
         flow: any :class:`~flownav.flows.FlowField`.
         task: a sampler of (start, target) pairs (default: the paper's Region 1 -> Region 2).
         num_envs: batch size B.
-        views: observation views to emit (``geo``, ``ego``, ``geo_flow``, ``ego_flow``).
+        views: observation views to emit (``geo``, ``ego``, ``geo_flow``, ``ego_flow``, ``ego_up``).
         dt: time step; time_limit: episode length in time units (truncation).
         u_max: the action's speed bound; swim_speed_scale multiplies the speed the swimmer
             really gets (0.1 in the ABC test, where the policy still acts in [0, u_max]).
@@ -255,6 +255,7 @@ class NavigationEnv(EnvBase):
             theta=self.theta,
             psi=self.psi,
             frame=body_frame(self.theta, self.psi) if self._ego else None,  # skipped for geo-only runs
+            speed=self.speed,
         )
         data = compute_views(state, self.views)
         data.update(

@@ -3,6 +3,15 @@
 * ``geo`` (8, eq. 4): target - position and the total velocity in the inertial frame, theta, psi.
 * ``ego`` (6, eq. 8): the same two vectors in the body frame (no angles, no inertial frame).
 * ``geo_flow`` / ``ego_flow`` (paper SI 1): the local flow velocity instead of the total one.
+* ``ego_up`` (8, ours): ``ego`` plus the vertical (inertial z) in the body frame, (sin psi, cos psi).
+  The action's turn rates are defined against the vertical (theta turns about it, psi tilts towards
+  it), so an ego student that cannot tell up from sideways cannot know which turn the teacher means.
+  A gravity sensor measures it on board; it does not change under rotations about z, so the
+  misalignment invariance of ``ego`` holds for ``ego_up`` too.
+* ``ego_onboard`` (9, ours): ``ego_up`` plus the swimmer's own speed through the water in the last step
+  (its propulsion knows it). With it the flow in the body frame follows from the total velocity
+  (v_b - (U, 0, 0)), so the student also senses where the stream comes from, still without any
+  flow sensor or inertial reference.
 """
 
 from __future__ import annotations
@@ -26,6 +35,7 @@ class State:
     theta: Tensor
     psi: Tensor
     frame: Tensor | None  # body frame [N, 3, 3]; None when no ego view is asked for
+    speed: Tensor | None = None  # the swimmer's own speed through the water in the last step (0 at reset)
 
 
 def _geo(s: State, vel: Tensor) -> Tensor:
@@ -36,11 +46,21 @@ def _ego(s: State, vel: Tensor) -> Tensor:
     return torch.cat((to_body(s.frame, s.to_target), to_body(s.frame, vel)), -1)
 
 
+def _ego_up(s: State) -> Tensor:
+    return torch.cat((_ego(s, s.velocity), torch.sin(s.psi)[:, None], torch.cos(s.psi)[:, None]), -1)
+
+
+def _ego_onboard(s: State) -> Tensor:
+    return torch.cat((_ego_up(s), s.speed[:, None]), -1)
+
+
 VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "geo": (8, lambda s: _geo(s, s.velocity)),
     "ego": (6, lambda s: _ego(s, s.velocity)),
     "geo_flow": (8, lambda s: _geo(s, s.flow)),
     "ego_flow": (6, lambda s: _ego(s, s.flow)),
+    "ego_up": (8, _ego_up),
+    "ego_onboard": (9, _ego_onboard),
 }
 
 
