@@ -12,8 +12,10 @@ Writes benchmarks/results/train_throughput.json. Measured in one process, same t
   geo view) and the same policy MLP (normaliser, TanhNormal sample) as plain tensors, no TensorDict.
 * ``torchrl_over_plain``: torchrl / plain collection speed (1.0 = no overhead).
 * ``minutes_to_90pct``: wall time from the start of a teacher training run to the first logged
-  ``train/success_rate`` >= 0.9, read from that run's metrics.csv (``--run``; a training run
-  of 30+ minutes is not repeated inside the benchmark). ``null`` if no run reached it.
+  success >= 0.9, read from that run's metrics.csv (``--run``; a training run of 30+ minutes is not
+  repeated inside the benchmark). The success is the periodic deterministic evaluation
+  (``eval/success_rate``) when the run logged one, else the training episodes' success. ``null`` if
+  no run reached it; ``best_success_reached`` then says how far they got, and when.
 """
 
 from __future__ import annotations
@@ -94,19 +96,43 @@ def plain_collect(env, policy, steps: int) -> float:
     return B * steps / (time.perf_counter() - t_start)
 
 
+def success_column(rows) -> str:
+    """The success a run is judged by: its periodic deterministic evaluation if it logged one."""
+    return "eval/success_rate" if any(r.get("eval/success_rate") for r in rows) else "train/success_rate"
+
+
 def minutes_to_target(run_dirs, target: float = 0.9):
+    """(minutes, run, step, column) of the earliest run to reach ``target`` success, or None."""
     best = None
     for run in run_dirs:
         path = Path(run) / "metrics.csv"
         if not path.is_file():
             continue
-        for r in csv.DictReader(open(path, newline="")):
-            v = r.get("train/success_rate")
+        rows = list(csv.DictReader(open(path, newline="")))
+        col = success_column(rows)
+        for r in rows:
+            v = r.get(col)
             if v not in (None, "", "nan") and float(v) >= target:
                 m = float(r["wall_time"]) / 60
                 if best is None or m < best[0]:
-                    best = (m, str(run), int(float(r["step"])))
+                    best = (m, str(run), int(float(r["step"])), col)
                 break
+    return best
+
+
+def best_reached(run_dirs):
+    """(success, minutes, run, column): the highest logged success of any run and when it was first logged."""
+    best = None
+    for run in run_dirs:
+        path = Path(run) / "metrics.csv"
+        if not path.is_file():
+            continue
+        rows = list(csv.DictReader(open(path, newline="")))
+        col = success_column(rows)
+        for r in rows:
+            v = r.get(col)
+            if v not in (None, "", "nan") and (best is None or float(v) > best[0]):
+                best = (float(v), float(r["wall_time"]) / 60, str(run), col)
     return best
 
 
@@ -165,6 +191,7 @@ def main(argv=None):
             "logger.progress=false",
             f"algo.total_frames={frames}",
             "algo.final_eval_episodes=0",
+            "algo.eval_every=0",
             "checkpoint_every=1000",
             *args.override,
         ]
@@ -177,6 +204,7 @@ def main(argv=None):
     e2e = (int(rows[-1]["step"]) - int(rows[0]["step"])) / dt_wall if dt_wall > 0 else math.nan
 
     reached = minutes_to_target(args.run)
+    best = best_reached(args.run)
     payload = {
         "headline": {
             "agent_steps_per_s": round(e2e, 1),
@@ -188,7 +216,11 @@ def main(argv=None):
         },
         "minutes_to_90pct_source": None
         if reached is None
-        else {"run": reached[1], "step": reached[2], "metric": "train/success_rate >= 0.9 (training episodes)"},
+        else {"run": reached[1], "step": reached[2], "metric": f"{reached[3]} >= 0.9"},
+        # What the runs did reach, when 90% was not: the highest logged success and the wall time to it.
+        "best_success_reached": None
+        if best is None
+        else {"success": round(best[0], 4), "minutes": round(best[1], 2), "run": best[2], "metric": best[3]},
         "flow": flow_name,
         "num_envs": B,
         "rollout_steps": T,
@@ -196,7 +228,7 @@ def main(argv=None):
         "actor_hidden": list(cfg.algo.actor.hidden),
         "command": "python benchmarks/train_throughput.py " + " ".join(sys.argv[1:]),
         "machine": machine(),
-        "note": "2 shared cores: other processes (a CFD run) compete; see machine.load_average_1min.",
+        "note": "2 cores, possibly shared with other jobs: see machine.load_average_1min.",
     }
     write_result("train_throughput", payload)
 

@@ -124,16 +124,14 @@ def test_ego_views_are_invariant_under_rotation_of_the_scene(phi, seed):
     to_target, vel, flow = (torch.randn(n, 3, generator=g, dtype=torch.float64) for _ in range(3))
     theta = (torch.rand(n, generator=g, dtype=torch.float64) * 2 - 1) * math.pi
     psi = (torch.rand(n, generator=g, dtype=torch.float64) * 2 - 1) * math.pi / 2
-    speed = torch.rand(n, generator=g, dtype=torch.float64)
-    views = ("geo", "ego", "ego_flow", "ego_up", "ego_onboard")
-    before = compute_views(State(to_target, vel, flow, theta, psi, body_frame(theta, psi), speed), views)
+    views = ("geo", "ego", "ego_flow", "ego_up")
+    before = compute_views(State(to_target, vel, flow, theta, psi, body_frame(theta, psi)), views)
     r = lambda v: rotate_z(v, phi)  # noqa: E731
-    rotated = State(r(to_target), r(vel), r(flow), theta + phi, psi, body_frame(theta + phi, psi), speed)
+    rotated = State(r(to_target), r(vel), r(flow), theta + phi, psi, body_frame(theta + phi, psi))
     after = compute_views(rotated, views)
     assert torch.allclose(before["ego"], after["ego"], atol=1e-12)
     assert torch.allclose(before["ego_flow"], after["ego_flow"], atol=1e-12)
     assert torch.allclose(before["ego_up"], after["ego_up"], atol=1e-12)
-    assert torch.allclose(before["ego_onboard"], after["ego_onboard"], atol=1e-12)
     if abs(math.sin(phi / 2)) > 1e-3:  # any rotation but the identity moves the geo view
         assert not torch.allclose(before["geo"], after["geo"], atol=1e-6)
 
@@ -375,15 +373,3 @@ def test_ego_up_is_the_vertical_in_the_body_frame():
     assert view.shape == (32, 8) and torch.allclose(up[:, 1], torch.zeros(32, dtype=torch.float64), atol=1e-12)
     assert torch.allclose(view[:, 6:], up[:, [0, 2]], atol=1e-12)
 
-
-def test_ego_onboard_recovers_the_body_frame_flow(wake_like_flow):
-    """ego_onboard: total velocity minus own speed along the heading is the flow in the body frame."""
-    env = NavigationEnv(wake_like_flow, num_envs=64, views=("ego_onboard", "ego_flow"), seed=5)
-    td = env.reset()
-    assert (td["ego_onboard"][:, 8] == 0).all()  # at rest in the fluid at reset
-    td["action"] = torch.rand(64, 3) * torch.tensor([1.0, 1.5, 3.0]) - torch.tensor([0.0, 0.75, 1.5])
-    nxt = env.step(td)["next"]
-    onboard = nxt["ego_onboard"]
-    assert torch.allclose(onboard[:, 8], td["action"][:, 0].clamp(0, 1), atol=1e-6)
-    flow_b = onboard[:, 3:6] - torch.nn.functional.pad(onboard[:, 8:9], (0, 2))
-    assert torch.allclose(flow_b, nxt["ego_flow"][:, 3:6], atol=1e-5)

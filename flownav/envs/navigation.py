@@ -255,7 +255,6 @@ class NavigationEnv(EnvBase):
             theta=self.theta,
             psi=self.psi,
             frame=body_frame(self.theta, self.psi) if self._ego else None,  # skipped for geo-only runs
-            speed=self.speed,
         )
         data = compute_views(state, self.views)
         data.update(

@@ -8,10 +8,6 @@
   it), so an ego student that cannot tell up from sideways cannot know which turn the teacher means.
   A gravity sensor measures it on board; it does not change under rotations about z, so the
   misalignment invariance of ``ego`` holds for ``ego_up`` too.
-* ``ego_onboard`` (9, ours): ``ego_up`` plus the swimmer's own speed through the water in the last step
-  (its propulsion knows it). With it the flow in the body frame follows from the total velocity
-  (v_b - (U, 0, 0)), so the student also senses where the stream comes from, still without any
-  flow sensor or inertial reference.
 """
 
 from __future__ import annotations
@@ -35,7 +31,6 @@ class State:
     theta: Tensor
     psi: Tensor
     frame: Tensor | None  # body frame [N, 3, 3]; None when no ego view is asked for
-    speed: Tensor | None = None  # the swimmer's own speed through the water in the last step (0 at reset)
 
 
 def _geo(s: State, vel: Tensor) -> Tensor:
@@ -50,17 +45,12 @@ def _ego_up(s: State) -> Tensor:
     return torch.cat((_ego(s, s.velocity), torch.sin(s.psi)[:, None], torch.cos(s.psi)[:, None]), -1)
 
 
-def _ego_onboard(s: State) -> Tensor:
-    return torch.cat((_ego_up(s), s.speed[:, None]), -1)
-
-
 VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "geo": (8, lambda s: _geo(s, s.velocity)),
     "ego": (6, lambda s: _ego(s, s.velocity)),
     "geo_flow": (8, lambda s: _geo(s, s.flow)),
     "ego_flow": (6, lambda s: _ego(s, s.flow)),
     "ego_up": (8, _ego_up),
-    "ego_onboard": (9, _ego_onboard),
 }
 
 
