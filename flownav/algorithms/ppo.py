@@ -122,6 +122,8 @@ def check_config(cfg) -> None:
     for key in ("eval_every", "eval_episodes", "final_eval_episodes"):
         if int(a.get(key) or 0) < 0:
             raise ConfigError(f"algo.{key} must be >= 0 (0 = off), got {a[key]}")
+    if int(a.get("eval_every") or 0) % int(a.log_every):
+        raise ConfigError(f"algo.eval_every ({a.eval_every}) must be a multiple of algo.log_every ({a.log_every})")
     if a.entropy_coeff < 0 or a.critic_coeff < 0:
         raise ConfigError("algo.entropy_coeff and algo.critic_coeff must be >= 0")
     if a.loss_critic_type not in LOSS_CRITIC_TYPES:

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import torch
 
+from flownav.atomic import atomic_write_text
 from flownav.paths import REPO_ROOT
 
 EVAL_SEED = 1_000_003  # held-out: training seeds are small integers
@@ -94,7 +95,7 @@ def cmd_eval(args) -> dict:
         "runs": runs,
     }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(out, indent=2))
+    atomic_write_text(args.out, json.dumps(out, indent=2))
     print(json.dumps({k: v for k, v in out.items() if k != "runs"}, indent=2))
     for r in runs:
         print(f"{r['checkpoint']}: success {r['success_rate']:.4f}, mean success time {r['mean_success_time']}")
