@@ -2,7 +2,7 @@
 
     python benchmarks/cfd_throughput.py [--threads 2] [--steps 40]
 
-Measures, on the lattice of the shipped dataset (D3Q19, 12 cells per D, 361 x 192 x 48):
+Measures, on the lattice of the shipped dataset (D3Q19, 12 cells per D, 433 x 216 x 48):
 * MLUPS (million lattice-node updates per second) of the full step (fused C stream+collide,
   Bouzidi cylinder, inflow/outflow) and of the fused kernel alone;
 * a STREAM-like copy bandwidth with torch on arrays of the lattice's size, and the bound
