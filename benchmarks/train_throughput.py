@@ -101,22 +101,26 @@ def success_column(rows) -> str:
     return "eval/success_rate" if any(r.get("eval/success_rate") for r in rows) else "train/success_rate"
 
 
+def logged_success(run):
+    """(success, minutes, step, column) of every row of a run's metrics.csv that logged its success."""
+    path = Path(run) / "metrics.csv"
+    if not path.is_file():
+        return
+    rows = list(csv.DictReader(open(path, newline="")))
+    col = success_column(rows)
+    for r in rows:
+        v = r.get(col)
+        if v not in (None, "", "nan"):
+            yield float(v), float(r["wall_time"]) / 60, int(float(r["step"])), col
+
+
 def minutes_to_target(run_dirs, target: float = 0.9):
     """(minutes, run, step, column) of the earliest run to reach ``target`` success, or None."""
     best = None
     for run in run_dirs:
-        path = Path(run) / "metrics.csv"
-        if not path.is_file():
-            continue
-        rows = list(csv.DictReader(open(path, newline="")))
-        col = success_column(rows)
-        for r in rows:
-            v = r.get(col)
-            if v not in (None, "", "nan") and float(v) >= target:
-                m = float(r["wall_time"]) / 60
-                if best is None or m < best[0]:
-                    best = (m, str(run), int(float(r["step"])), col)
-                break
+        first = next(((m, str(run), step, col) for v, m, step, col in logged_success(run) if v >= target), None)
+        if first is not None and (best is None or first[0] < best[0]):
+            best = first
     return best
 
 
@@ -124,15 +128,9 @@ def best_reached(run_dirs):
     """(success, minutes, run, column): the highest logged success of any run and when it was first logged."""
     best = None
     for run in run_dirs:
-        path = Path(run) / "metrics.csv"
-        if not path.is_file():
-            continue
-        rows = list(csv.DictReader(open(path, newline="")))
-        col = success_column(rows)
-        for r in rows:
-            v = r.get(col)
-            if v not in (None, "", "nan") and (best is None or float(v) > best[0]):
-                best = (float(v), float(r["wall_time"]) / 60, str(run), col)
+        for v, m, _, col in logged_success(run):
+            if best is None or v > best[0]:
+                best = (v, m, str(run), col)
     return best
 
 
