@@ -23,7 +23,7 @@ from flownav.envs import (
     SymmetricTask,
 )
 from flownav.envs.kinematics import body_frame, heading_vector, to_body
-from flownav.envs.observations import State, compute_views
+from flownav.envs.observations import HISTORY_LEN, HISTORY_STRIDE, State, compute_views
 from flownav.flows import Box, FunctionFlow, UniformFlow, rotate_z
 from flownav.flows.base import WAKE_BOUNDS, Cylinder
 from flownav.paths import REPO_ROOT
@@ -124,14 +124,14 @@ def test_ego_views_are_invariant_under_rotation_of_the_scene(phi, seed):
     to_target, vel, flow = (torch.randn(n, 3, generator=g, dtype=torch.float64) for _ in range(3))
     theta = (torch.rand(n, generator=g, dtype=torch.float64) * 2 - 1) * math.pi
     psi = (torch.rand(n, generator=g, dtype=torch.float64) * 2 - 1) * math.pi / 2
-    views = ("geo", "ego", "ego_flow", "ego_up")
-    before = compute_views(State(to_target, vel, flow, theta, psi, body_frame(theta, psi)), views)
+    history = torch.randn(n, HISTORY_LEN, 3, generator=g, dtype=torch.float64)
+    views = ("geo", "ego", "ego_flow", "ego_up", "ego_mem")
+    before = compute_views(State(to_target, vel, flow, theta, psi, body_frame(theta, psi), history), views)
     r = lambda v: rotate_z(v, phi)  # noqa: E731
-    rotated = State(r(to_target), r(vel), r(flow), theta + phi, psi, body_frame(theta + phi, psi))
+    rotated = State(r(to_target), r(vel), r(flow), theta + phi, psi, body_frame(theta + phi, psi), r(history))
     after = compute_views(rotated, views)
-    assert torch.allclose(before["ego"], after["ego"], atol=1e-12)
-    assert torch.allclose(before["ego_flow"], after["ego_flow"], atol=1e-12)
-    assert torch.allclose(before["ego_up"], after["ego_up"], atol=1e-12)
+    for view in ("ego", "ego_flow", "ego_up", "ego_mem"):
+        assert torch.allclose(before[view], after[view], atol=1e-12), view
     if abs(math.sin(phi / 2)) > 1e-3:  # any rotation but the identity moves the geo view
         assert not torch.allclose(before["geo"], after["geo"], atol=1e-6)
 
@@ -373,3 +373,28 @@ def test_ego_up_is_the_vertical_in_the_body_frame():
     assert view.shape == (32, 8) and torch.allclose(up[:, 1], torch.zeros(32, dtype=torch.float64), atol=1e-12)
     assert torch.allclose(view[:, 6:], up[:, [0, 2]], atol=1e-12)
 
+
+
+def test_ego_mem_remembers_the_flow_every_stride_steps_in_the_current_body_frame():
+    """In a flow u = (t, 0, 0), sample k of the memory is the flow k * HISTORY_STRIDE steps ago (the start
+    flow before the episode began), seen from the current heading; a reset swimmer forgets its past."""
+    flow = FunctionFlow(lambda p, t: torch.stack((t, 0 * t, 0 * t), -1), bounds=BIG, max_speed=100.0)
+    task = ListTask([[0.0, 0, 0]], [[50.0, 0, 0]])
+    env = NavigationEnv(flow, task, num_envs=2, views=("ego_up", "ego_mem"), random_flow_phase=False)
+    td = env.reset()
+    set_heading(env, math.pi / 2, 0.0)  # heading +y: the inertial x axis is the body's -y axis
+    steps = 9
+    for _ in range(steps):
+        td = act(env, td, [0.0, 0.0, 0.0])
+    memory = td["ego_mem"][:, 8:].view(2, HISTORY_LEN, 3)
+    lag_steps = torch.arange(HISTORY_LEN) * HISTORY_STRIDE
+    expected_t = ((steps - lag_steps).clamp_min(0) * env.dt).float()
+    assert memory[0, :, 1].tolist() == pytest.approx((-expected_t).tolist(), abs=1e-5)
+    assert memory[:, :, [0, 2]].abs().max().item() < 1e-5
+    assert torch.allclose(td["ego_mem"][:, :8], td["ego_up"])
+    td = env.reset(td.clone().set("_reset", torch.tensor([[True], [False]])))
+    set_heading(env, math.pi / 2, 0.0)
+    td = act(env, td, [0.0, 0.0, 0.0])  # the reset swimmer restarts at t = 0, the other goes on to step 10
+    memory = -td["ego_mem"][:, 8:].view(2, HISTORY_LEN, 3)[:, :, 1]
+    assert memory[0].tolist() == pytest.approx([env.dt] + [0.0] * (HISTORY_LEN - 1), abs=1e-5)
+    assert memory[1].tolist() == pytest.approx(((steps + 1 - lag_steps).clamp_min(0) * env.dt).tolist(), abs=1e-5)

@@ -197,6 +197,8 @@ def tiny_world(tmp_path_factory):
         ("teacher_flowobs", "geo_flow", "teacher"),
         ("student_flowobs", "ego_flow", "student"),
         ("student_up", "ego_up", "student"),
+        ("student_mem", "ego_mem", "student"),
+        ("teacher_abc", "geo", "teacher"),
     ]:
         pol = DeterministicPolicy(observation_size(view), ACTION_LOW, action_high(), hidden=(16, 16))
         ck[name] = save_policy_checkpoint(root / f"{name}.pt", pol, view, role)
@@ -292,9 +294,11 @@ def test_missing_checkpoints_are_skipped_with_the_command(tiny_world, tmp_path):
         f"policies.student.checkpoint={ck['student']}",
         f"policies.baseline.checkpoint={ck['baseline']}",
         f"policies.student_up.checkpoint={ck['student_up']}",
+        f"policies.student_mem.checkpoint={ck['student_mem']}",
     )
     r = evaluate.run(cfg, log=lambda *_: None)["training"]
-    assert set(r["results"]) == {"student", "baseline", "student_up", "head_to_target", "passive"}  # no teacher file
+    expected = {"student", "baseline", "student_up", "student_mem", "head_to_target", "passive"}
+    assert set(r["results"]) == expected  # no teacher file
     assert any("python train.py +experiment=teacher" in m for m in r["missing"])
     assert "python train.py +experiment=teacher" in (tmp_path / "R.md").read_text()
 

@@ -50,7 +50,7 @@ from flownav.envs.navigation import Status
 from flownav.envs.observations import observation_size
 from flownav.paths import resolve
 
-STUDENT_VIEWS = ("ego", "ego_flow", "ego_up", "geo", "geo_flow")
+STUDENT_VIEWS = ("ego", "ego_flow", "ego_up", "ego_mem", "geo", "geo_flow")
 
 
 def imitation_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:

@@ -45,7 +45,9 @@ def body_frame(theta: Tensor, psi: Tensor) -> Tensor:
 
 
 def to_body(frame: Tensor, vec: Tensor) -> Tensor:
-    """Components of inertial vectors ``[N, 3]`` in the body frame (R^T v)."""
+    """Components of inertial vectors ``[N, 3]`` (or ``[N, K, 3]``, K per swimmer) in the body frame (R^T v)."""
+    if vec.dim() == 3:
+        return (frame[:, None] * vec[:, :, :, None]).sum(2)
     return (frame * vec[:, :, None]).sum(1)  # elementwise: faster than einsum/bmm for 3x3
 
 

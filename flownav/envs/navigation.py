@@ -18,11 +18,21 @@ from enum import IntEnum
 
 import torch
 from tensordict import TensorDict, TensorDictBase
+from torch import Tensor
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from flownav.envs.kinematics import body_frame, heading_vector, move, turn, wrap_angle
-from flownav.envs.observations import State, check_views, compute_views, needs_body_frame, observation_size
+from flownav.envs.observations import (
+    HISTORY_LEN,
+    HISTORY_STRIDE,
+    State,
+    check_views,
+    compute_views,
+    needs_body_frame,
+    needs_history,
+    observation_size,
+)
 from flownav.envs.reward import RewardConfig, step_reward
 from flownav.envs.tasks import RegionTask
 from flownav.flows.base import FlowField
@@ -48,7 +58,7 @@ class NavigationEnv(EnvBase):
         flow: any :class:`~flownav.flows.FlowField`.
         task: a sampler of (start, target) pairs (default: the paper's Region 1 -> Region 2).
         num_envs: batch size B.
-        views: observation views to emit (``geo``, ``ego``, ``geo_flow``, ``ego_flow``, ``ego_up``).
+        views: observation views to emit (``geo``, ``ego``, ``geo_flow``, ``ego_flow``, ``ego_up``, ``ego_mem``).
         dt: time step; time_limit: episode length in time units (truncation).
         u_max: the action's speed bound; swim_speed_scale multiplies the speed the swimmer
             really gets (0.1 in the ABC test, where the policy still acts in [0, u_max]).
@@ -85,6 +95,7 @@ class NavigationEnv(EnvBase):
         super().__init__(device=device, batch_size=torch.Size([num_envs]))
         self.views = check_views(views)
         self._ego = needs_body_frame(self.views)
+        self._memory = needs_history(self.views)
         self.angle = math.radians(misalignment_deg)
         self.rotation_center = tuple(rotation_center)
         base = flow.to(self.device)
@@ -138,6 +149,12 @@ class NavigationEnv(EnvBase):
         self.start_dist, self.dist, self.speed = z(), z(), z()
         self.status = torch.zeros(B, dtype=torch.int64, device=dev)
         self.steps = torch.zeros(B, dtype=torch.int64, device=dev)
+        # Memory views: a ring of the last (HISTORY_LEN - 1) * HISTORY_STRIDE + 1 flow samples. All swimmers
+        # step together, so one pointer serves the batch; a reset swimmer's ring is refilled with its start flow.
+        ring = (HISTORY_LEN - 1) * HISTORY_STRIDE + 1 if self._memory else 0
+        self.flow_ring = torch.zeros(B, ring, 3, device=dev)
+        self.ring_ptr = 0
+        self.ring_lags = torch.arange(HISTORY_LEN, device=dev) * HISTORY_STRIDE
 
     def _set_seed(self, seed: int | None):
         self.rng.manual_seed(int(seed) if seed is not None else 0)
@@ -203,6 +220,8 @@ class NavigationEnv(EnvBase):
             # At rest relative to the fluid until the first action.
             self.flow_vel, self.vel = put(self.flow_vel, flow_vel), put(self.vel, flow_vel)
             self.start_dist, self.dist = put(self.start_dist, d), put(self.dist, d)
+            if self._memory:  # no past yet: the swimmer has been sensing its start flow
+                self.flow_ring[idx] = flow_vel[:, None, :]
         out = self._observe()
         false = torch.zeros(self.num_envs, 1, dtype=torch.bool, device=self.device)
         out.update({"done": false, "terminated": false.clone(), "truncated": false.clone()})
@@ -221,6 +240,9 @@ class NavigationEnv(EnvBase):
         self.time = self.steps * self.dt
         self.flow_vel = self.flow.velocity(self.pos, self.t0 + self.time)
         self.vel = swim + self.flow_vel
+        if self._memory:
+            self.ring_ptr = (self.ring_ptr + 1) % self.flow_ring.shape[1]
+            self.flow_ring[:, self.ring_ptr] = self.flow_vel
 
         prev_dist = self.dist
         self.dist = (self.target - self.pos).norm(dim=-1)
@@ -247,6 +269,10 @@ class NavigationEnv(EnvBase):
         )
         return out
 
+    def _flow_history(self) -> Tensor:
+        """The flow HISTORY_STRIDE steps apart, newest (now) first: ``[B, HISTORY_LEN, 3]``."""
+        return self.flow_ring[:, (self.ring_ptr - self.ring_lags) % self.flow_ring.shape[1]]
+
     def _observe(self) -> TensorDict:
         state = State(
             to_target=self.target - self.pos,
@@ -255,6 +281,7 @@ class NavigationEnv(EnvBase):
             theta=self.theta,
             psi=self.psi,
             frame=body_frame(self.theta, self.psi) if self._ego else None,  # skipped for geo-only runs
+            flow_history=self._flow_history() if self._memory else None,
         )
         data = compute_views(state, self.views)
         data.update(

@@ -8,6 +8,11 @@
   it), so an ego student that cannot tell up from sideways cannot know which turn the teacher means.
   A gravity sensor measures it on board; it does not change under rotations about z, so the
   misalignment invariance of ``ego`` holds for ``ego_up`` too.
+* ``ego_mem`` (8 + 3 K, ours): ``ego_up`` plus a short memory, the local flow velocity of the last K
+  samples (every ``HISTORY_STRIDE`` steps), each expressed in the *current* body frame. A memoryless ego
+  student sees one noisy flow sample and cannot tell the stream's direction from a vortex's; the flow
+  averaged over about one shedding period can. On board: a velocity sensor minus the own swim command
+  gives the flow, a gyro turns past samples into the current frame. Rotations about z leave it unchanged.
 """
 
 from __future__ import annotations
@@ -31,6 +36,13 @@ class State:
     theta: Tensor
     psi: Tensor
     frame: Tensor | None  # body frame [N, 3, 3]; None when no ego view is asked for
+    flow_history: Tensor | None = None  # [N, HISTORY_LEN, 3] past flow velocities, inertial; memory views only
+
+
+# The memory of ``ego_mem``: HISTORY_LEN flow samples, HISTORY_STRIDE steps apart (newest first). With
+# dt = 0.2 they span 4.8 time units, about one vortex-shedding period of the Re = 300 wake (St 0.19).
+HISTORY_LEN = 7
+HISTORY_STRIDE = 4
 
 
 def _geo(s: State, vel: Tensor) -> Tensor:
@@ -45,17 +57,28 @@ def _ego_up(s: State) -> Tensor:
     return torch.cat((_ego(s, s.velocity), torch.sin(s.psi)[:, None], torch.cos(s.psi)[:, None]), -1)
 
 
+def _ego_mem(s: State) -> Tensor:
+    past = to_body(s.frame, s.flow_history).flatten(1)
+    return torch.cat((_ego_up(s), past), -1)
+
+
 VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "geo": (8, lambda s: _geo(s, s.velocity)),
     "ego": (6, lambda s: _ego(s, s.velocity)),
     "geo_flow": (8, lambda s: _geo(s, s.flow)),
     "ego_flow": (6, lambda s: _ego(s, s.flow)),
     "ego_up": (8, _ego_up),
+    "ego_mem": (8 + 3 * HISTORY_LEN, _ego_mem),
 }
+MEMORY_VIEWS = ("ego_mem",)
 
 
 def needs_body_frame(names) -> bool:
     return any(name.startswith("ego") for name in names)
+
+
+def needs_history(names) -> bool:
+    return any(name in MEMORY_VIEWS for name in names)
 
 
 def check_views(names) -> tuple[str, ...]:
