@@ -374,7 +374,6 @@ def test_ego_up_is_the_vertical_in_the_body_frame():
     assert torch.allclose(view[:, 6:], up[:, [0, 2]], atol=1e-12)
 
 
-
 def test_ego_mem_remembers_the_flow_every_stride_steps_in_the_current_body_frame():
     """In a flow u = (t, 0, 0), sample k of the memory is the flow k * HISTORY_STRIDE steps ago (the start
     flow before the episode began), seen from the current heading; a reset swimmer forgets its past."""
