@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 from pathlib import Path
 
 import pytest
@@ -157,3 +158,24 @@ def test_resume_refuses_other_view(tmp_path):
         )
     with pytest.raises(ConfigError, match="geo"):
         run(cfg, tmp_path / "x")
+
+
+def test_report_eval_ships_the_best_checkpoint_by_held_out_success(tmp_path):
+    """`report eval --ship` evaluates every seed on the same held-out episodes and copies the best one."""
+    from flownav.algorithms import report
+    from flownav.checkpoint import save_policy_checkpoint
+    from flownav.evaluation.scripted import HeadToTarget, Passive, fit_expert
+
+    paths = []
+    for name, expert in (("drifts", Passive()), ("swims", HeadToTarget())):
+        policy, _ = fit_expert(expert, hidden=(32, 32), steps=400, batch=512, seed=0)
+        paths.append(str(save_policy_checkpoint(tmp_path / f"{name}.pt", policy, "geo", "teacher")))
+    overrides = [o for o in TINY if o.startswith(("flow", "task", "env."))]
+    args = ["eval", "--name", "t", "--out", str(tmp_path / "t.json"), "--episodes", "64", "--threads", "1"]
+    args += [a for o in overrides for a in ("--override", o)] + ["--ship", str(tmp_path / "shipped.pt"), *paths]
+    report.main(args)
+    out = json.loads((tmp_path / "t.json").read_text())
+    rates = [r["success_rate"] for r in out["runs"]]
+    assert rates[0] == 0.0 and rates[1] > 0.5
+    assert out["shipped"]["checkpoint"] == paths[1]
+    assert (tmp_path / "shipped.pt").read_bytes() == Path(paths[1]).read_bytes()

@@ -3,6 +3,9 @@
     # success on 10,000 held-out episodes of the training task, one entry per checkpoint
     python -m flownav.algorithms.report eval --name teacher --out results/teacher.json \\
         multirun/teacher/<date>/seed*/checkpoints/last.pt
+    # the same, and ship the best of them (by this held-out success) to checkpoints/, atomically
+    python -m flownav.algorithms.report eval --name teacher --out results/teacher.json \
+        --ship checkpoints/teacher.pt multirun/teacher/<date>/seed*/checkpoints/last.pt
     # mean +- std of the training reward over seeds (paper Fig. 2b), teacher and baseline
     python -m flownav.algorithms.report curves --out results/figures/reward_curves.png \\
         --group "teacher (-geo)" multirun/teacher/<date>/seed* \\
@@ -26,7 +29,7 @@ from pathlib import Path
 
 import torch
 
-from flownav.atomic import atomic_write_text
+from flownav.atomic import atomic_copy, atomic_write_text
 from flownav.paths import REPO_ROOT
 
 EVAL_SEED = 1_000_003  # held-out: training seeds are small integers
@@ -94,6 +97,11 @@ def cmd_eval(args) -> dict:
         },
         "runs": runs,
     }
+    if args.ship:  # the rule for every shipped policy: the best seed by held-out success
+        best = max(runs, key=lambda r: r["success_rate"])
+        atomic_copy(best["checkpoint"], args.ship)
+        out["shipped"] = {"checkpoint": best["checkpoint"], "to": args.ship, "success_rate": best["success_rate"]}
+        print(f"shipped {best['checkpoint']} ({best['success_rate']:.4f}) -> {args.ship}")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(args.out, json.dumps(out, indent=2))
     print(json.dumps({k: v for k, v in out.items() if k != "runs"}, indent=2))
@@ -154,6 +162,7 @@ def main(argv=None):
     e.add_argument("--chunk", type=int, default=10_000, help="episodes stepped together")
     e.add_argument("--override", action="append", default=[], help="Hydra override, e.g. flow=vortex_street")
     e.add_argument("--threads", type=int, default=2)
+    e.add_argument("--ship", default=None, help="copy the best checkpoint (held-out success) here, atomically")
     c = sub.add_parser("curves", help="mean +- std training curves over seeds")
     c.add_argument("--group", nargs="+", action="append", required=True, metavar=("LABEL", "RUN_DIR"))
     c.add_argument("--key", action="append", default=None, help="metrics.csv column(s)")
