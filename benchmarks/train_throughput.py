@@ -126,7 +126,8 @@ def minutes_to_target(run_dirs, target: float = 0.9):
 
 def minutes_per_run(run_dirs, target: float = 0.9) -> dict:
     """{run: minutes to ``target`` success, or None}: every run's own time, not just the fastest."""
-    return {str(run): next((round(m, 2) for v, m, _, _ in logged_success(run) if v >= target), None) for run in run_dirs}
+    first = {str(run): next((m for v, m, _, _ in logged_success(run) if v >= target), None) for run in run_dirs}
+    return {run: None if m is None else round(m, 2) for run, m in first.items()}
 
 
 def best_reached(run_dirs):
