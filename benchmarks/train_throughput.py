@@ -114,20 +114,24 @@ def logged_success(run):
             yield float(v), float(r["wall_time"]) / 60, int(float(r["step"])), col
 
 
+def first_reaching(run, target: float = 0.9):
+    """(minutes, step, column) of the first logged success >= ``target`` of a run, or None."""
+    return next(((m, step, col) for v, m, step, col in logged_success(run) if v >= target), None)
+
+
 def minutes_to_target(run_dirs, target: float = 0.9):
     """(minutes, run, step, column) of the earliest run to reach ``target`` success, or None."""
-    best = None
-    for run in run_dirs:
-        first = next(((m, str(run), step, col) for v, m, step, col in logged_success(run) if v >= target), None)
-        if first is not None and (best is None or first[0] < best[0]):
-            best = first
-    return best
+    hits = [(hit[0], str(run), *hit[1:]) for run in run_dirs if (hit := first_reaching(run, target))]
+    return min(hits, default=None)
 
 
 def minutes_per_run(run_dirs, target: float = 0.9) -> dict:
     """{run: minutes to ``target`` success, or None}: every run's own time, not just the fastest."""
-    first = {str(run): next((m for v, m, _, _ in logged_success(run) if v >= target), None) for run in run_dirs}
-    return {run: None if m is None else round(m, 2) for run, m in first.items()}
+    out = {}
+    for run in run_dirs:
+        hit = first_reaching(run, target)
+        out[str(run)] = None if hit is None else round(hit[0], 2)
+    return out
 
 
 def best_reached(run_dirs):

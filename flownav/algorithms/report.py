@@ -4,7 +4,7 @@
     python -m flownav.algorithms.report eval --name teacher --out results/teacher.json \\
         multirun/teacher/<date>/seed*/checkpoints/last.pt
     # the same, and ship the best of them (by this held-out success) to checkpoints/, atomically
-    python -m flownav.algorithms.report eval --name teacher --out results/teacher.json \
+    python -m flownav.algorithms.report eval --name teacher --out results/teacher.json \\
         --ship checkpoints/teacher.pt multirun/teacher/<date>/seed*/checkpoints/last.pt
     # mean +- std of the training reward over seeds (paper Fig. 2b), teacher and baseline
     python -m flownav.algorithms.report curves --out results/figures/reward_curves.png \\
