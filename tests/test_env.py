@@ -397,3 +397,39 @@ def test_ego_mem_remembers_the_flow_every_stride_steps_in_the_current_body_frame
     memory = -td["ego_mem"][:, 8:].view(2, HISTORY_LEN, 3)[:, :, 1]
     assert memory[0].tolist() == pytest.approx([env.dt] + [0.0] * (HISTORY_LEN - 1), abs=1e-5)
     assert memory[1].tolist() == pytest.approx(((steps + 1 - lag_steps).clamp_min(0) * env.dt).tolist(), abs=1e-5)
+
+
+def test_geo_sincos_is_geo_with_a_continuous_heading():
+    """Same numbers as geo, theta as (cos, sin): no jump where theta wraps, heading straight upstream."""
+    flow = UniformFlow((0.3, 0.1, 0.0), bounds=BIG)
+    env = NavigationEnv(flow, num_envs=2, views=("geo", "geo_sincos"))
+    env.reset()
+    set_heading(env, 0.0, 0.2)
+    env.theta = torch.tensor([math.pi - 1e-3, -math.pi + 1e-3])  # two headings 0.002 rad apart, across the wrap
+    td = env._observe()
+    geo, sc = td["geo"], td["geo_sincos"]
+    assert torch.equal(sc[:, :6], geo[:, :6]) and torch.equal(sc[:, 8], geo[:, 7])
+    assert torch.allclose(sc[:, 6], torch.cos(geo[:, 6])) and torch.allclose(sc[:, 7], torch.sin(geo[:, 6]))
+    assert (geo[0, 6] - geo[1, 6]).abs() > 6.0 and (sc[0, 6:] - sc[1, 6:]).abs().max() < 3e-3
+
+
+def test_privileged_view_reports_the_flow_and_its_phase():
+    def swirl(x, t):
+        return torch.stack((torch.sin(t), torch.cos(t), 0.1 * x[:, 2]), -1)
+
+    period = 2 * math.pi
+    flow = FunctionFlow(swirl, bounds=BIG, max_speed=1.5, period=period)
+    env = NavigationEnv(flow, num_envs=8, views=("geo_sincos", "privileged"), dt=0.5, seed=3)
+    td = env.reset()
+    for _ in range(5):
+        td = act(env, td, [0.5, 0.1, 0.0])
+    priv = td["privileged"]
+    assert torch.equal(priv[:, :9], td["geo_sincos"])
+    t = env.t0 + env.time  # each swimmer's own flow time (random start phase)
+    assert torch.allclose(priv[:, 9:12], swirl(env.pos, t), atol=1e-5)
+    angle = 2 * math.pi * torch.remainder(t / period, 1.0)
+    assert priv[:, 12].tolist() == pytest.approx(torch.cos(angle).tolist(), abs=1e-5)
+    assert priv[:, 13].tolist() == pytest.approx(torch.sin(angle).tolist(), abs=1e-5)
+    # A steady flow has no phase: cos = sin = 0.
+    steady = NavigationEnv(still_water(), num_envs=4, views=("privileged",)).reset()["privileged"]
+    assert torch.equal(steady[:, 12:], torch.zeros(4, 2))

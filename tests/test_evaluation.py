@@ -229,6 +229,7 @@ EXPERIMENTS = [
     "symmetric",
     "flowobs",
     "misalignment",
+    "time_limit",
     "abc",
     "abc_ablation",
     "figures",
@@ -242,6 +243,8 @@ def test_each_experiment_composes_and_runs_tiny(tiny_world, name):
 
     root, data, ck = tiny_world
     extra = ["suite.figures.movie_frames=4"] if name == "figures" else []
+    if name == "time_limit":
+        extra = ["suite.time_limit.limits=[1,2,3]"]
     if name == "loss_curves":
         extra = [f"suite.loss_curves.run_globs=[{root}/runs/*/metrics.csv]", f"suite.loss_curves.json={root}/loss.json"]
         run = root / "runs" / "s0"
@@ -257,6 +260,9 @@ def test_each_experiment_composes_and_runs_tiny(tiny_world, name):
             assert s["successes"] + sum(f["count"] for f in s["failures"].values()) == 24
     if name == "misalignment":
         assert set(r["results"]["student"]) == {f"{a:g}" for a in range(0, 181, 15)}
+    if name == "time_limit":  # a longer limit can only add successes
+        rates = [r["results"]["teacher"][k]["success_rate"] for k in ("1", "2", "3")]
+        assert rates == sorted(rates)
     if name in ("figures", "extended", "misalignment", "abc_ablation", "loss_curves"):
         assert r["figures"] and all(Path(f).is_file() for f in r["figures"])
     if name == "loss_curves":
@@ -276,6 +282,46 @@ def test_paper_composes_every_experiment():
     ratios = list(cfg.suite.abc_ablation.ratios)
     assert len(ratios) >= 6 and min(ratios) == pytest.approx(0.029) and max(ratios) == pytest.approx(0.29)
     assert cfg.suite.abc.env.swim_speed_scale == 0.1
+
+
+def test_time_limit_rows_equal_runs_at_that_limit(tiny_world):
+    """One run at the longest limit, cut at a shorter one, gives exactly what a run at that limit gives."""
+    import evaluate
+
+    root, data, ck = tiny_world
+    # Still water: the scripted navigator arrives after about its start distance (4 to 9), spread over the limits.
+    calm = [o for o in tiny_overrides(root, data, ck) if not o.startswith("flow.")] + [
+        "flow=uniform",
+        "flow.velocity=[0,0,0]",
+    ]
+    base = [*calm, "max_episodes=64"]
+    pols = "[head_to_target,teacher]"
+    cfg = compose_eval(
+        "+experiment=paper_time_limit", *base, "suite.time_limit.limits=[5,7,10]", f"suite.time_limit.policies={pols}"
+    )
+    sweep = evaluate.run(cfg, log=lambda *_: None)["time_limit"]["results"]
+    for limit in ("5", "7"):
+        cfg = compose_eval(
+            "+experiment=paper_training", *base, f"env.time_limit={limit}", f"suite.training.policies={pols}"
+        )
+        direct = evaluate.run(cfg, log=lambda *_: None)["training"]["results"]
+        for pol in ("head_to_target", "teacher"):
+            cut = sweep[pol][limit]
+            assert cut["successes"] == direct[pol]["successes"]
+            assert cut["failures"] == direct[pol]["failures"]
+            assert cut["mean_success_time"] == pytest.approx(direct[pol]["mean_success_time"])
+    wins = [sweep["head_to_target"][k]["successes"] for k in ("5", "7", "10")]
+    assert wins[0] < wins[1] < wins[2], wins  # each limit really cuts episodes short
+
+
+def test_truncate_at_exact_small_case():
+    from flownav.envs.navigation import Status
+    from flownav.evaluation.metrics import truncate_at
+
+    S, L, H, T = Status.SUCCESS, Status.LEFT_DOMAIN, Status.HIT_OBSTACLE, Status.TIMEOUT
+    status = torch.tensor([S, S, L, H, T, S])
+    time = torch.tensor([1.0, 2.2, 2.0, 3.0, 4.0, 2.0])
+    assert truncate_at(status, time, 2.0, 0.2).tolist() == [S, T, L, T, T, S]
 
 
 def test_missing_checkpoints_are_skipped_with_the_command(tiny_world, tmp_path):

@@ -31,6 +31,7 @@ from flownav.envs.observations import (
     compute_views,
     needs_body_frame,
     needs_history,
+    needs_phase,
     observation_size,
 )
 from flownav.envs.reward import RewardConfig, step_reward
@@ -58,7 +59,8 @@ class NavigationEnv(EnvBase):
         flow: any :class:`~flownav.flows.FlowField`.
         task: a sampler of (start, target) pairs (default: the paper's Region 1 -> Region 2).
         num_envs: batch size B.
-        views: observation views to emit (``geo``, ``ego``, ``geo_flow``, ``ego_flow``, ``ego_up``, ``ego_mem``).
+        views: observation views to emit (``geo``, ``ego``, ``geo_flow``, ``ego_flow``, ``ego_up``, ``ego_mem``,
+            ``geo_sincos``, ``privileged``; see :mod:`flownav.envs.observations`).
         dt: time step; time_limit: episode length in time units (truncation).
         u_max: the action's speed bound; swim_speed_scale multiplies the speed the swimmer
             really gets (0.1 in the ABC test, where the policy still acts in [0, u_max]).
@@ -96,6 +98,7 @@ class NavigationEnv(EnvBase):
         self.views = check_views(views)
         self._ego = needs_body_frame(self.views)
         self._memory = needs_history(self.views)
+        self._phase = needs_phase(self.views)
         self.angle = math.radians(misalignment_deg)
         self.rotation_center = tuple(rotation_center)
         base = flow.to(self.device)
@@ -273,6 +276,11 @@ class NavigationEnv(EnvBase):
         """The flow HISTORY_STRIDE steps apart, newest (now) first: ``[B, HISTORY_LEN, 3]``."""
         return self.flow_ring[:, (self.ring_ptr - self.ring_lags) % self.flow_ring.shape[1]]
 
+    def _flow_phase(self) -> Tensor | None:
+        """Where each swimmer's flow is in its period, in [0, 1); None for a flow without one."""
+        period = self.flow.period
+        return torch.remainder((self.t0 + self.time) / period, 1.0) if period else None
+
     def _observe(self) -> TensorDict:
         state = State(
             to_target=self.target - self.pos,
@@ -282,6 +290,7 @@ class NavigationEnv(EnvBase):
             psi=self.psi,
             frame=body_frame(self.theta, self.psi) if self._ego else None,  # skipped for geo-only runs
             flow_history=self._flow_history() if self._memory else None,
+            flow_phase=self._flow_phase() if self._phase else None,
         )
         data = compute_views(state, self.views)
         data.update(

@@ -13,10 +13,18 @@
   student sees one noisy flow sample and cannot tell the stream's direction from a vortex's; the flow
   averaged over about one shedding period can. On board: a velocity sensor minus the own swim command
   gives the flow, a gyro turns past samples into the current frame. Rotations about z leave it unchanged.
+* ``geo_sincos`` (9, ours): ``geo`` with theta as (cos theta, sin theta). theta wraps at +-pi, which is
+  heading straight upstream, the very heading of the wake crossing; the angle jumps there and the
+  pair does not. Same information as ``geo``.
+* ``privileged`` (14, critics only): ``geo_sincos`` plus the local flow velocity and the flow's phase
+  (cos, sin of 2 pi t / period; zeros for a flow without a period). What the simulator knows and the
+  swimmer does not: a critic that sees the phase of the periodic wake can tell a vortex arriving from
+  one leaving, and gives the actor less noisy advantages. The actor keeps its own view.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -37,6 +45,7 @@ class State:
     psi: Tensor
     frame: Tensor | None  # body frame [N, 3, 3]; None when no ego view is asked for
     flow_history: Tensor | None = None  # [N, HISTORY_LEN, 3] past flow velocities, inertial; memory views only
+    flow_phase: Tensor | None = None  # [N] flow time / period in [0, 1); None: no period (or not asked for)
 
 
 # The memory of ``ego_mem``: HISTORY_LEN flow samples, HISTORY_STRIDE steps apart (newest first). With
@@ -62,6 +71,21 @@ def _ego_mem(s: State) -> Tensor:
     return torch.cat((_ego_up(s), past), -1)
 
 
+def _geo_sincos(s: State) -> Tensor:
+    return torch.cat(
+        (s.to_target, s.velocity, torch.cos(s.theta)[:, None], torch.sin(s.theta)[:, None], s.psi[:, None]), -1
+    )
+
+
+def _privileged(s: State) -> Tensor:
+    if s.flow_phase is None:  # a flow without a period has no phase
+        phase = s.flow.new_zeros(s.flow.shape[0], 2)
+    else:
+        angle = 2 * math.pi * s.flow_phase[:, None]
+        phase = torch.cat((torch.cos(angle), torch.sin(angle)), -1)
+    return torch.cat((_geo_sincos(s), s.flow, phase), -1)
+
+
 VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "geo": (8, lambda s: _geo(s, s.velocity)),
     "ego": (6, lambda s: _ego(s, s.velocity)),
@@ -69,8 +93,13 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "ego_flow": (6, lambda s: _ego(s, s.flow)),
     "ego_up": (8, _ego_up),
     "ego_mem": (8 + 3 * HISTORY_LEN, _ego_mem),
+    "geo_sincos": (9, _geo_sincos),
+    "privileged": (14, _privileged),
 }
 MEMORY_VIEWS = ("ego_mem",)
+
+
+PHASE_VIEWS = ("privileged",)
 
 
 def needs_body_frame(names) -> bool:
@@ -79,6 +108,10 @@ def needs_body_frame(names) -> bool:
 
 def needs_history(names) -> bool:
     return any(name in MEMORY_VIEWS for name in names)
+
+
+def needs_phase(names) -> bool:
+    return any(name in PHASE_VIEWS for name in names)
 
 
 def check_views(names) -> tuple[str, ...]:

@@ -7,6 +7,7 @@ flow, a task, env overrides, an episode count and the paper's numbers. Kinds:
 * ``extended``      fixed target, starts anywhere: success maps over subregions (Fig. 4, SI 2);
 * ``misalignment``  the scene rotated about z by each angle (Fig. 5e);
 * ``ratio_sweep``   U_max / V_max ablation by scaling the flow speed (Fig. 6c);
+* ``time_limit``    success against the episode's time limit, from one run at the longest (ours);
 * ``figures``       trajectories, velocity traces and a movie (Figs. 3, 5, 6);
 * ``loss_curves``   DAgger loss of every student run found, mean +- std over seeds (Fig. 2c).
 
@@ -27,7 +28,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from flownav.builders import build_env, build_flow, build_task
 from flownav.checkpoint import CheckpointError, load_policy
-from flownav.evaluation.metrics import subregion_counts, summarize
+from flownav.evaluation.metrics import subregion_counts, summarize, truncate_at
 from flownav.evaluation.rollout import run_episodes
 from flownav.evaluation.scripted import SCRIPTED
 from flownav.flows.grid import GridFlowError
@@ -246,6 +247,23 @@ class Suite:
             "figures": figures,
         }
 
+    def _run_time_limit(self, name, spec, out) -> dict:
+        """Success against the time limit. The paper does not give its limit, and a deterministic episode
+        is the same up to any limit, so one run at the longest limit answers every shorter one."""
+        flow = self.flow(spec.flow)
+        limits = sorted(float(t) for t in spec.limits)
+        env_cfg = OmegaConf.merge(self.env_cfg(spec), {"time_limit": limits[-1]})
+        results: dict[str, dict] = {}
+        for pol in self._each_policy(spec, out):
+            ep = self.rollout(pol, flow, spec.task, env_cfg, spec.episodes)
+            results[pol] = {}
+            for limit in limits:
+                status = truncate_at(ep.status, ep.time, limit, float(env_cfg.dt))
+                results[pol][_angle_key(limit)] = summarize(status, ep.time)
+                self.log(f"[{name}] {pol} limit {limit:g}: {_fmt(results[pol][_angle_key(limit)])}")
+        figures = self._sweep_figure(name, results, limits, "time limit (time units D/U)", out["title"])
+        return {"limits": limits, "results": results, "figures": figures}
+
     def _run_figures(self, name, spec, out) -> dict:
         from flownav.viz import trajectories as tv
 
@@ -368,7 +386,7 @@ def _policy_names(spec) -> list[str]:
     return list(dict.fromkeys(names))
 
 
-KINDS = ("success", "extended", "misalignment", "ratio_sweep", "figures", "loss_curves")
+KINDS = ("success", "extended", "misalignment", "ratio_sweep", "time_limit", "figures", "loss_curves")
 
 
 def _angle_key(a: float) -> str:

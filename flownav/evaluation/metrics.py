@@ -68,6 +68,13 @@ def summarize(status: Tensor, time: Tensor) -> dict:
     return out
 
 
+def truncate_at(status: Tensor, time: Tensor, limit: float, dt: float) -> Tensor:
+    """The outcomes the same episodes would have had with a shorter time limit: whatever ended after
+    ``limit`` (success or failure) is a timeout. ``dt`` only guards the float comparison of step times."""
+    late = time > limit + 0.5 * dt
+    return torch.where(late & (status != Status.RUNNING), torch.full_like(status, int(Status.TIMEOUT)), status)
+
+
 def subregion_counts(start: Tensor, success: Tensor, bounds: Box, bins=(10, 10, 10)) -> tuple[Tensor, Tensor]:
     """Episodes and successes per subregion of the start position: two int tensors of shape ``bins``.
 

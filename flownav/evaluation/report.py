@@ -240,6 +240,8 @@ def write_report(data: dict, path: Path, command: str, seconds: float | None = N
             lines += _success_table(r)
         elif kind == "misalignment":
             lines += _sweep_table(r, r.get("angles", []), lambda a: f"{a:g}", "angle (deg)")
+        elif kind == "time_limit":
+            lines += _sweep_table(r, r.get("limits", []), lambda t: f"{t:g}", "time limit")
         elif kind == "ratio_sweep":
             scales = [f"flow x{s:.3g}" for s in r.get("flow_speed_scales", [])]
             lines += _sweep_table(r, r.get("ratios", []), lambda x: f"{x:.3f}", "U_max / V_max", extra=scales)
