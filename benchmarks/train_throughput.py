@@ -41,7 +41,7 @@ from flownav.envs.observations import State, compute_views  # noqa: E402
 from flownav.envs.reward import step_reward  # noqa: E402
 
 
-def plain_collect(env, policy, steps: int) -> float:
+def plain_collect(env, policy, view: str, steps: int) -> float:
     """Collection with plain tensors: the env's physics functions, its reset sampler, the same MLP."""
     B, dt, cfg, flow = env.num_envs, env.dt, env.reward_cfg, env.flow
     low, high = env.action_spec.space.low[0], env.action_spec.space.high[0]
@@ -54,7 +54,7 @@ def plain_collect(env, policy, steps: int) -> float:
 
     def observe():
         s = State(target - pos, vel, flow_vel, theta, psi, None)
-        return compute_views(s, ["geo"])["geo"]
+        return compute_views(s, [view])[view]
 
     obs = observe()
     t_start = time.perf_counter()
@@ -166,9 +166,10 @@ def main(argv=None):
     flow = build_flow(cfg.flow)
     task = build_task(cfg.task, flow)
     B, T = int(cfg.env.num_envs), int(cfg.algo.rollout_steps)
-    env = build_env(cfg.env, flow, task, ["geo"], num_envs=B, seed=0)
+    view = str(cfg.obs.view)  # the teacher's
+    env = build_env(cfg.env, flow, task, [view], num_envs=B, seed=0)
     low, high = env.action_spec.space.low[0], env.action_spec.space.high[0]
-    policy, actor, _, _ = make_actor_critic("geo", "geo", low, high, cfg.algo.actor, cfg.algo.critic)
+    policy, actor, _, _ = make_actor_critic(view, view, low, high, cfg.algo.actor, cfg.algo.critic)
 
     # 1. TorchRL collection alone
     collector = Collector(env, actor, frames_per_batch=B * T, total_frames=-1, trust_policy=True)
@@ -181,9 +182,9 @@ def main(argv=None):
     collector.shutdown()
 
     # 2. plain-torch collection, same physics and MLP
-    plain_env = build_env(cfg.env, flow, task, ["geo"], num_envs=B, seed=0)
-    plain_collect(plain_env, policy, T)
-    plain = sum(plain_collect(plain_env, policy, T) for _ in range(args.iterations)) / args.iterations
+    plain_env = build_env(cfg.env, flow, task, [view], num_envs=B, seed=0)
+    plain_collect(plain_env, policy, view, T)
+    plain = sum(plain_collect(plain_env, policy, view, T) for _ in range(args.iterations)) / args.iterations
 
     # 3. end-to-end PPO (a short training run through train())
     import tempfile

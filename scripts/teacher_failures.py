@@ -24,7 +24,10 @@ from flownav.paths import REPO_ROOT
 
 def main(argv: list[str]) -> None:
     torch.set_num_threads(1)
-    policy, _ = load_policy(argv[0], expect_obs="geo")
+    policy, payload = load_policy(argv[0])
+    view = payload["obs"]
+    if not view.startswith("geo"):
+        raise SystemExit(f"{argv[0]} reads {view!r}: this script analyses a geo teacher")
     conf = REPO_ROOT / "conf"
     env_cfg = OmegaConf.to_container(OmegaConf.load(conf / "env/default.yaml"))
     for key, value in (a.split("=", 1) for a in argv[1:]):
@@ -33,9 +36,9 @@ def main(argv: list[str]) -> None:
     task = build_task(OmegaConf.to_container(OmegaConf.load(conf / "task/regions.yaml")), flow)
 
     def make_env(n, chunk):
-        return build_env(env_cfg, flow, task, ["geo"], num_envs=n, seed=1000 + chunk)
+        return build_env(env_cfg, flow, task, [view], num_envs=n, seed=1000 + chunk)
 
-    ep = run_episodes(policy, "geo", make_env, 4000)
+    ep = run_episodes(policy, view, make_env, 4000)
 
     status, final = ep.status, ep.final_position
     print(f"success {ep.success.float().mean():.4f}, mean success time {ep.time[ep.success].mean():.2f}")

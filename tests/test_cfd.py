@@ -31,9 +31,7 @@ def test_lattice_moments_are_isotropic(name):
     w = lat.w_tensor(torch.float64)
     assert torch.isclose(w.sum(), torch.tensor(1.0, dtype=torch.float64))
     assert torch.allclose(torch.einsum("q,qa->a", w, c), torch.zeros(3, dtype=torch.float64))
-    assert torch.allclose(
-        torch.einsum("q,qa,qb->ab", w, c, c), torch.eye(3, dtype=torch.float64) / 3
-    )
+    assert torch.allclose(torch.einsum("q,qa,qb->ab", w, c, c), torch.eye(3, dtype=torch.float64) / 3)
     m4 = torch.einsum("q,qa,qb,qc,qd->abcd", w, c, c, c, c)
     eye = torch.eye(3, dtype=torch.float64)
     iso = (
@@ -67,9 +65,7 @@ def _taylor_green(backend: str, lattice="D3Q19", n=24, tau=0.8, steps=120):
     lat = get_lattice(lattice)
     grid = Grid(3, n, n)
     k = 2 * math.pi / n
-    y, z = torch.meshgrid(
-        torch.arange(n, dtype=torch.float32), torch.arange(n, dtype=torch.float32), indexing="ij"
-    )
+    y, z = torch.meshgrid(torch.arange(n, dtype=torch.float32), torch.arange(n, dtype=torch.float32), indexing="ij")
     u0 = 0.02
     u = torch.zeros(3, 3, n, n)
     u[1] = u0 * torch.sin(k * y) * torch.cos(k * z)
@@ -121,9 +117,7 @@ def test_c_kernel_matches_torch_reference():
 
 
 def test_drag_is_positive_and_lift_vanishes_in_steady_symmetric_flow():
-    cfg = SimConfig(
-        re=20, cells_per_d=6, u_lattice=0.12, span=None, x_range=(-4, 8), y_half=4, perturb=0.0
-    )
+    cfg = SimConfig(re=20, cells_per_d=6, u_lattice=0.12, span=None, x_range=(-4, 8), y_half=4, perturb=0.0)
     sim = CylinderLBM(cfg)
     state = run(sim, 15.0, None, desc="Re=20")
     cd, cl = state.cd[-1], state.cl[-1]
@@ -175,10 +169,7 @@ def test_checkpoint_resume_is_exact(tmp_path):
 def test_strouhal_and_loop_window_helpers():
     t = np.arange(0, 60, 0.05)
     assert abs(diagnostics.dominant_frequency(np.sin(2 * np.pi * 0.2 * t), 0.05) - 0.2) < 0.002
-    assert (
-        abs(diagnostics.zero_crossing_frequency(np.sin(2 * np.pi * 0.2 * t + 0.3), 0.05) - 0.2)
-        < 0.002
-    )
+    assert abs(diagnostics.zero_crossing_frequency(np.sin(2 * np.pi * 0.2 * t + 0.3), 0.05) - 0.2) < 0.002
     period = 19.6  # frames
     n = np.arange(120)
     frames = np.stack([np.sin(2 * np.pi * n / period + p) for p in (0.0, 1.0, 2.0)], -1)[:, None]
@@ -198,9 +189,7 @@ def test_generate_writes_a_loadable_periodic_dataset(tmp_path):
     from flownav.flows.grid import load_grid_flow
 
     sim = SimConfig(re=100, cells_per_d=4, u_lattice=0.15, x_range=(-5, 26), y_half=7.5, span=2.0)
-    cfg = GenerateConfig(
-        sim=sim, warmup=12.0, record=14.0, frame_dt=0.5, out_spacing=0.5, min_periods=1
-    )
+    cfg = GenerateConfig(sim=sim, warmup=12.0, record=14.0, frame_dt=0.5, out_spacing=0.5, min_periods=1)
     _, state = simulate(cfg, tmp_path / "run")
     diag = write_dataset(cfg, state, tmp_path / "data", command="test")
     flow = load_grid_flow(tmp_path / "data")

@@ -63,7 +63,7 @@ def rows(run_dir):
 def test_student_experiment_config():
     with initialize_config_dir(config_dir=CONF, version_base="1.3"):
         cfg = compose("config", overrides=["+experiment=student"])
-    assert cfg.algo.name == "dagger" and cfg.obs.view == "ego" and cfg.algo.teacher_view == "geo"
+    assert cfg.algo.name == "dagger" and cfg.obs.view == "ego" and cfg.algo.teacher_view is None  # the checkpoint's
     assert cfg.teacher_checkpoint == "checkpoints/teacher.pt" and cfg.output_checkpoint == "checkpoints/student.pt"
     assert cfg.algo.beta.initial == 0.0  # the paper: the student acts alone
     with initialize_config_dir(config_dir=CONF, version_base="1.3"):
@@ -134,8 +134,10 @@ def test_teacher_of_the_wrong_view_is_refused(tmp_path):
 
     ego = tmp_path / "ego_teacher.pt"
     save_policy_checkpoint(ego, DeterministicPolicy(6, ACTION_LOW, action_high(), hidden=(8,)), "ego", "baseline")
-    with pytest.raises(CheckpointError, match=r"reading 'ego'.*needs 'geo'"):
+    with pytest.raises(CheckpointError, match=r"reads 'ego'; a DAgger teacher reads a geo view"):
         train.run(make_cfg(ego, "algo.iterations=1"), tmp_path / "run")
+    with pytest.raises(CheckpointError, match=r"reading 'ego'.*needs 'geo'"):  # a pinned view must match
+        train.run(make_cfg(ego, "algo.iterations=1", "algo.teacher_view=geo"), tmp_path / "run")
     with pytest.raises(CheckpointError, match="no checkpoint"):
         train.run(make_cfg(tmp_path / "nothing.pt", "algo.iterations=1"), tmp_path / "run2")
 

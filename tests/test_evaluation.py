@@ -189,7 +189,7 @@ def tiny_world(tmp_path_factory):
     torch.manual_seed(0)
     ck = {}
     for name, view, role in [
-        ("teacher", "geo", "teacher"),
+        ("teacher", "geo_sincos", "teacher"),
         ("student", "ego", "student"),
         ("baseline", "ego", "baseline"),
         ("teacher_symmetric", "geo", "teacher"),
@@ -364,7 +364,7 @@ def test_single_checkpoint_and_wrong_view_is_refused(tiny_world, tmp_path):
     out = evaluate.run(cfg, log=lambda *_: None)
     assert out["episodes"] == 30 and json.loads((tmp_path / "s.json").read_text())["episodes"] == 30
     cfg = compose_eval(f"checkpoint={ck['teacher']}", "expect_obs=ego", f"flow.path={data}", "episodes=5")
-    with pytest.raises(CheckpointError, match=r"reading 'geo'.*needs 'ego'"):
+    with pytest.raises(CheckpointError, match=r"reading 'geo_sincos'.*needs 'ego'"):
         evaluate.run(cfg, log=lambda *_: None)
     # In the suite, a checkpoint of the wrong view is skipped with the same message.
     cfg = compose_eval(

@@ -32,7 +32,7 @@ def test_every_experiment_composes(experiment):
 
 def test_teacher_and_baseline_differ_only_in_view():
     t, b = cfg_of("+experiment=teacher"), cfg_of("+experiment=baseline_ego")
-    assert (t.obs.view, b.obs.view) == ("geo", "ego")
+    assert (t.obs.view, b.obs.view) == ("geo_sincos", "ego")
     assert t.algo == b.algo and t.env == b.env and t.flow == b.flow and t.task == b.task
     assert t.flow.type == "grid"  # the default flow is the CFD wake
 

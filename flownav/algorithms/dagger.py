@@ -41,13 +41,14 @@ from flownav.agents.networks import DeterministicPolicy
 from flownav.atomic import atomic_copy, atomic_write_text
 from flownav.builders import ConfigError, build_env, build_flow, build_task
 from flownav.checkpoint import (
+    CheckpointError,
     atomic_torch_save,
     load_policy,
     load_resume_checkpoint,
     save_policy_checkpoint,
 )
 from flownav.envs.navigation import Status
-from flownav.envs.observations import observation_size
+from flownav.envs.observations import VIEWS, observation_size
 from flownav.paths import resolve
 
 STUDENT_VIEWS = ("ego", "ego_flow", "ego_up", "ego_mem", "geo", "geo_flow")
@@ -133,7 +134,7 @@ def train(cfg, run_dir) -> dict:
     a = cfg.algo
     # ---- config pulled into locals before the hot loop
     seed = int(cfg.seed)
-    student_view, teacher_view = str(cfg.obs.view), str(a.teacher_view)
+    student_view = str(cfg.obs.view)
     iterations, steps = int(a.iterations), int(a.steps_per_iteration)
     updates, batch_size = int(a.updates_per_iteration), int(a.batch_size)
     checkpoint_every = int(cfg.checkpoint_every) if cfg.get("checkpoint_every") else 0
@@ -141,7 +142,17 @@ def train(cfg, run_dir) -> dict:
     device = str(cfg.device)
     torch.manual_seed(seed)
 
-    teacher, teacher_payload = load_policy(resolve(str(cfg.teacher_checkpoint)), expect_obs=teacher_view, device=device)
+    # The teacher reads the view its checkpoint records, unless algo.teacher_view pins one (then they must match).
+    teacher, teacher_payload = load_policy(
+        resolve(str(cfg.teacher_checkpoint)), expect_obs=a.teacher_view, device=device
+    )
+    teacher_view = str(teacher_payload["obs"])
+    if not teacher_view.startswith("geo"):
+        raise CheckpointError(
+            f"teacher checkpoint {cfg.teacher_checkpoint} reads {teacher_view!r}; a DAgger teacher reads a geo view "
+            f"({', '.join(v for v in VIEWS if v.startswith('geo'))}): pass a teacher's checkpoint "
+            "(python train.py +experiment=teacher)"
+        )
     teacher_sha = hashlib.sha256(resolve(str(cfg.teacher_checkpoint)).read_bytes()).hexdigest()[:12]
     flow = build_flow(cfg.flow, device=device)
     task = build_task(cfg.task, flow)
