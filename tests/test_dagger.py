@@ -69,7 +69,8 @@ def test_student_experiment_config():
     with initialize_config_dir(config_dir=CONF, version_base="1.3"):
         flow = compose("config", overrides=["+experiment=student_flowobs"])
         sym = compose("config", overrides=["+experiment=student_symmetric"])
-    assert flow.obs.view == "ego_flow" and flow.algo.teacher_view == "geo_flow"
+    assert flow.obs.view == "ego_flow" and flow.algo.teacher_view is None
+    assert flow.teacher_checkpoint == "checkpoints/teacher_flowobs.pt"
     assert sym.task.type == "symmetric" and sym.teacher_checkpoint == "checkpoints/teacher_symmetric.pt"
 
 

@@ -15,7 +15,7 @@
   gives the flow, a gyro turns past samples into the current frame. Rotations about z leave it unchanged.
 * ``geo_sincos`` (9, ours): ``geo`` with theta as (cos theta, sin theta). theta wraps at +-pi, which is
   heading straight upstream, the very heading of the wake crossing; the angle jumps there and the
-  pair does not. Same information as ``geo``.
+  pair does not. Same information as ``geo``. ``geo_flow_sincos``: the same for ``geo_flow`` (SI 1).
 * ``privileged`` (14, critics only): ``geo_sincos`` plus the local flow velocity and the flow's phase
   (cos, sin of 2 pi t / period; zeros for a flow without a period). What the simulator knows and the
   swimmer does not: a critic that sees the phase of the periodic wake can tell a vortex arriving from
@@ -71,10 +71,8 @@ def _ego_mem(s: State) -> Tensor:
     return torch.cat((_ego_up(s), past), -1)
 
 
-def _geo_sincos(s: State) -> Tensor:
-    return torch.cat(
-        (s.to_target, s.velocity, torch.cos(s.theta)[:, None], torch.sin(s.theta)[:, None], s.psi[:, None]), -1
-    )
+def _geo_sincos(s: State, vel: Tensor) -> Tensor:
+    return torch.cat((s.to_target, vel, torch.cos(s.theta)[:, None], torch.sin(s.theta)[:, None], s.psi[:, None]), -1)
 
 
 def _privileged(s: State) -> Tensor:
@@ -83,7 +81,7 @@ def _privileged(s: State) -> Tensor:
     else:
         angle = 2 * math.pi * s.flow_phase[:, None]
         phase = torch.cat((torch.cos(angle), torch.sin(angle)), -1)
-    return torch.cat((_geo_sincos(s), s.flow, phase), -1)
+    return torch.cat((_geo_sincos(s, s.velocity), s.flow, phase), -1)
 
 
 VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
@@ -93,7 +91,8 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "ego_flow": (6, lambda s: _ego(s, s.flow)),
     "ego_up": (8, _ego_up),
     "ego_mem": (8 + 3 * HISTORY_LEN, _ego_mem),
-    "geo_sincos": (9, _geo_sincos),
+    "geo_sincos": (9, lambda s: _geo_sincos(s, s.velocity)),
+    "geo_flow_sincos": (9, lambda s: _geo_sincos(s, s.flow)),
     "privileged": (14, _privileged),
 }
 MEMORY_VIEWS = ("ego_mem",)
