@@ -9,7 +9,7 @@ Writes benchmarks/results/train_throughput.json. Measured in one process, same t
   normaliser update), swimmer steps per second over ``--iterations`` iterations after one warm-up.
 * ``torchrl_collect_steps_per_s``: the Collector alone (policy sampling + env steps + auto-reset).
 * ``plain_collect_steps_per_s``: the same physics (flownav.envs.kinematics, the flow, the reward, the
-  geo view) and the same policy MLP (normaliser, TanhNormal sample) as plain tensors, no TensorDict.
+  teacher's view) and the same policy MLP (normaliser, TanhNormal sample) as plain tensors, no TensorDict.
 * ``torchrl_over_plain``: torchrl / plain collection speed (1.0 = no overhead).
 * ``minutes_to_90pct``: wall time from the start of a teacher training run to the first logged
   success >= 0.9, read from that run's metrics.csv (``--run``; a training run of 30+ minutes is not
