@@ -10,7 +10,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-COLORS = {"teacher": "tab:blue", "student": "tab:orange", "baseline": "tab:gray"}
+from flownav.viz.colors import policy_color
 
 
 def plot_sweep(results: dict, xs, out: Path, xlabel: str, title: str = "", keyfn=lambda x: f"{x:g}") -> str:
@@ -18,12 +18,12 @@ def plot_sweep(results: dict, xs, out: Path, xlabel: str, title: str = "", keyfn
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig, ax = plt.subplots(figsize=(5.5, 3.8))
-    for name, per in results.items():
+    for i, (name, per) in enumerate(results.items()):
         rates = np.array([100 * per[keyfn(x)]["success_rate"] for x in xs])
         lo = np.array([100 * per[keyfn(x)]["success_ci95"][0] for x in xs])
         hi = np.array([100 * per[keyfn(x)]["success_ci95"][1] for x in xs])
         err = [np.clip(rates - lo, 0, None), np.clip(hi - rates, 0, None)]
-        ax.errorbar(xs, rates, yerr=err, marker="o", capsize=3, label=name, color=COLORS.get(name.split("_")[0]))
+        ax.errorbar(xs, rates, yerr=err, marker="o", capsize=3, label=name, color=policy_color(name, i))
     ax.set_xlabel(xlabel)
     ax.set_ylabel("success rate (%)")
     ax.set_ylim(-2, 102)

@@ -17,13 +17,8 @@ import torch
 from flownav.envs.kinematics import body_frame, to_body
 from flownav.envs.navigation import Status
 from flownav.flows.transforms import RotatedFlow
+from flownav.viz.colors import policy_color
 from flownav.viz.fields import symmetric_levels, xy_slice
-
-COLORS = {"teacher": "tab:blue", "student": "tab:orange", "baseline": "tab:gray"}
-
-
-def _color(name: str, i: int = 0) -> str:
-    return COLORS.get(str(name).split("_")[0], f"C{i}")
 
 
 def _path(traj, i: int = 0) -> np.ndarray:
@@ -66,8 +61,8 @@ def plot_trajectories_3d(runs: dict, flow, out: Path, title: str = "") -> str:
     for i, (name, traj) in enumerate(runs.items()):
         p = _path(traj)
         status = Status(int(traj["status"][0])).name.lower()
-        ax.plot(p[:, 0], p[:, 1], p[:, 2], color=_color(name, i), label=f"{name} ({status})")
-        ax2.plot(p[:, 0], p[:, 1], color=_color(name, i), lw=1.5)
+        ax.plot(p[:, 0], p[:, 1], p[:, 2], color=policy_color(name, i), label=f"{name} ({status})")
+        ax2.plot(p[:, 0], p[:, 1], color=policy_color(name, i), lw=1.5)
     for a in (ax, ax2):
         a.plot(*([start[0]], [start[1]]) + (([start[2]],) if a is ax else ()), "o", color="k")
         a.plot(*([target[0]], [target[1]]) + (([target[2]],) if a is ax else ()), "*", color="gold", ms=14, mec="k")
