@@ -81,10 +81,12 @@ def run_paper(cfg: DictConfig, log=print) -> dict:
     from flownav.evaluation.report import merge_results, provenance, write_report
 
     cmd = command_line()
+    # Before the run: its own outputs (figures, results) are tracked files and would mark the commit dirty.
+    prov = provenance(cmd)
     t0 = time.time()
     results = run_suite(cfg, log=log)
-    data = merge_results(resolve(str(cfg.results)), results, provenance(cmd))
-    report = write_report(data, resolve(str(cfg.report)), cmd, seconds=time.time() - t0)
+    data = merge_results(resolve(str(cfg.results)), results, prov)
+    report = write_report(data, resolve(str(cfg.report)), cmd, seconds=time.time() - t0, commit=prov["commit"])
     log(f"wrote {cfg.results} and {report} in {time.time() - t0:.1f} s")
     return results
 

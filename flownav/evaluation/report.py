@@ -214,8 +214,8 @@ def _performance(seconds: float | None, exps: dict) -> list[str]:
     return lines + [""]
 
 
-def write_report(data: dict, path: Path, command: str, seconds: float | None = None) -> Path:
-    """REPORT.md from the merged results (every experiment run so far)."""
+def write_report(data: dict, path: Path, command: str, seconds: float | None = None, commit: str | None = None) -> Path:
+    """REPORT.md from the merged results (every experiment run so far); ``commit``: the code that ran (default HEAD)."""
     path = Path(path)
     report_dir = path.parent
     exps = data.get("experiments", {})
@@ -223,7 +223,7 @@ def write_report(data: dict, path: Path, command: str, seconds: float | None = N
         "# flownav: the paper's experiments, reproduced",
         "",
         "Written by `python evaluate.py +experiment=paper` (flownav/evaluation/report.py); this run: "
-        f"`{command}` at commit `{git_commit()}`, {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC. "
+        f"`{command}` at commit `{commit or git_commit()}`, {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC. "
         "Machine-readable results: `results/paper.json`. How to run each experiment: `docs/evaluation.md`.",
         "",
         "Success rates carry Wilson 95% intervals; every episode is deterministic (policy mean action), one "
