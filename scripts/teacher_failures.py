@@ -18,6 +18,7 @@ from omegaconf import OmegaConf
 from flownav.builders import build_env, build_flow, build_task
 from flownav.checkpoint import load_policy
 from flownav.envs.navigation import Status
+from flownav.envs.observations import GEO_VIEWS
 from flownav.evaluation.rollout import run_episodes
 from flownav.paths import REPO_ROOT
 
@@ -26,7 +27,7 @@ def main(argv: list[str]) -> None:
     torch.set_num_threads(1)
     policy, payload = load_policy(argv[0])
     view = payload["obs"]
-    if not view.startswith("geo"):
+    if view not in GEO_VIEWS:
         raise SystemExit(f"{argv[0]} reads {view!r}: this script analyses a geo teacher")
     conf = REPO_ROOT / "conf"
     env_cfg = OmegaConf.to_container(OmegaConf.load(conf / "env/default.yaml"))

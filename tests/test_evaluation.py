@@ -421,7 +421,7 @@ def test_report_puts_the_paper_next_to_ours(tmp_path):
     assert json.loads((tmp_path / "paper.json").read_text())["experiments"]["training"]["provenance"]["commit"]
 
 
-def test_provenance_is_the_code_before_the_run(tiny_world, monkeypatch):
+def test_provenance_is_the_code_before_the_run(tiny_world, monkeypatch, tmp_path):
     """The suite's own outputs (figures, results) are tracked files: the commit is read before they change."""
     import evaluate
     from flownav.evaluation import report
@@ -429,10 +429,13 @@ def test_provenance_is_the_code_before_the_run(tiny_world, monkeypatch):
     states = iter(["abc123", "abc123+dirty"])
     monkeypatch.setattr(report, "git_commit", lambda *a: next(states, "abc123+dirty"))
     root, data, ck = tiny_world
-    cfg = compose_eval("+experiment=paper_training", *tiny_overrides(root, data, ck))
+    own = [f"results={tmp_path / 'paper.json'}", f"report={tmp_path / 'REPORT.md'}"]  # not the shared ones
+    cfg = compose_eval("+experiment=paper_training", *tiny_overrides(root, data, ck), *own)
     evaluate.run(cfg, log=lambda *_: None)
-    assert json.loads((root / "paper.json").read_text())["experiments"]["training"]["provenance"]["commit"] == "abc123"
-    text = (root / "REPORT.md").read_text()
+    assert (
+        json.loads((tmp_path / "paper.json").read_text())["experiments"]["training"]["provenance"]["commit"] == "abc123"
+    )
+    text = (tmp_path / "REPORT.md").read_text()
     assert "at commit `abc123`" in text and "dirty" not in text
 
 

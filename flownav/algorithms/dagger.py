@@ -48,7 +48,7 @@ from flownav.checkpoint import (
     save_policy_checkpoint,
 )
 from flownav.envs.navigation import Status
-from flownav.envs.observations import VIEWS, observation_size
+from flownav.envs.observations import GEO_VIEWS, observation_size
 from flownav.paths import resolve
 
 STUDENT_VIEWS = ("ego", "ego_flow", "ego_up", "ego_mem", "geo", "geo_flow")
@@ -147,10 +147,10 @@ def train(cfg, run_dir) -> dict:
         resolve(str(cfg.teacher_checkpoint)), expect_obs=a.teacher_view, device=device
     )
     teacher_view = str(teacher_payload["obs"])
-    if not teacher_view.startswith("geo"):
+    if teacher_view not in GEO_VIEWS:
         raise CheckpointError(
             f"teacher checkpoint {cfg.teacher_checkpoint} reads {teacher_view!r}; a DAgger teacher reads a geo view "
-            f"({', '.join(v for v in VIEWS if v.startswith('geo'))}): pass a teacher's checkpoint "
+            f"({', '.join(GEO_VIEWS)}): pass a teacher's checkpoint "
             "(python train.py +experiment=teacher)"
         )
     teacher_sha = hashlib.sha256(resolve(str(cfg.teacher_checkpoint)).read_bytes()).hexdigest()[:12]

@@ -36,7 +36,7 @@ from flownav.atomic import atomic_copy
 from flownav.builders import ConfigError, build_env, build_flow, build_task
 from flownav.checkpoint import load_checkpoint, load_resume_checkpoint, save_policy_checkpoint
 from flownav.envs.navigation import NavigationEnv, Status
-from flownav.envs.observations import VIEWS, observation_size
+from flownav.envs.observations import GEO_VIEWS, VIEWS, observation_size
 from flownav.evaluation.rollout import run_episodes
 from flownav.paths import resolve
 from flownav.runlog import RunLogger
@@ -204,7 +204,7 @@ def train(cfg, run_dir) -> dict:
     recompute_advantage = bool(a.recompute_advantage)
     normalize_online = bool(a.update_normalizer)
     seed = int(cfg.seed)
-    role = str(cfg.get("role") or ("teacher" if obs_key.startswith("geo") else "baseline"))
+    role = str(cfg.get("role") or ("teacher" if obs_key in GEO_VIEWS else "baseline"))
     target_success = float(a.target_success)
     eval_episodes = int(a.final_eval_episodes)
     eval_every, periodic_eval_episodes = int(a.get("eval_every") or 0), int(a.get("eval_episodes") or 0)

@@ -59,8 +59,8 @@ class NavigationEnv(EnvBase):
         flow: any :class:`~flownav.flows.FlowField`.
         task: a sampler of (start, target) pairs (default: the paper's Region 1 -> Region 2).
         num_envs: batch size B.
-        views: observation views to emit (``geo``, ``ego``, ``geo_flow``, ``ego_flow``, ``ego_up``, ``ego_mem``,
-            ``geo_sincos``, ``privileged``; see :mod:`flownav.envs.observations`).
+        views: observation views to emit, names of :data:`flownav.envs.observations.VIEWS` (``geo_sincos``,
+            ``ego``, ``ego_up``, ...).
         dt: time step; time_limit: episode length in time units (truncation).
         u_max: the action's speed bound; swim_speed_scale multiplies the speed the swimmer
             really gets (0.1 in the ABC test, where the policy still acts in [0, u_max]).

@@ -96,9 +96,8 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "privileged": (14, _privileged),
 }
 MEMORY_VIEWS = ("ego_mem",)
-
-
 PHASE_VIEWS = ("privileged",)
+GEO_VIEWS = tuple(name for name in VIEWS if name.startswith("geo"))  # the teacher's kind: inertial frame
 
 
 def needs_body_frame(names) -> bool:
