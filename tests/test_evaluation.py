@@ -230,6 +230,7 @@ EXPERIMENTS = [
     "flowobs",
     "misalignment",
     "time_limit",
+    "still_water",
     "abc",
     "abc_ablation",
     "figures",
@@ -254,7 +255,7 @@ def test_each_experiment_composes_and_runs_tiny(tiny_world, name):
     results = evaluate.run(cfg, log=lambda *_: None)
     r = results[name]
     assert not r["missing"], r["missing"]
-    if name in ("training", "flowobs", "abc", "extended", "symmetric"):
+    if name in ("training", "flowobs", "still_water", "abc", "extended", "symmetric"):
         for s in r["results"].values():
             assert s["episodes"] == 24
             assert s["successes"] + sum(f["count"] for f in s["failures"].values()) == 24

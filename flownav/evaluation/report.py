@@ -191,6 +191,14 @@ def _verdicts(exps: dict) -> list[str]:
     if "student" in abc:
         s = abc["student"]["success_rate"]
         lines.append(f"- ABC student: {pct(s)} -> {'met' if s >= 0.76 else 'NOT met'} (target >= 76%, paper 75.9%).")
+    still = exps.get("still_water", {}).get("results", {})
+    if "student" in still:
+        ref = still.get("head_to_target", {}).get("success_rate")
+        s = still["student"]["success_rate"]
+        lines.append(
+            f"- Not a target, a diagnostic for the transfer: in still water the student reaches {pct(s)}"
+            + (f", swimming straight at the target {pct(ref)}." if ref is not None else ".")
+        )
     if len(lines) == 4:
         lines.append("- No result to compare yet (checkpoints missing).")
     return lines + [""]
