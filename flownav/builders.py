@@ -94,6 +94,18 @@ def build_task(cfg: Mapping, flow: FlowField):
     return _pick(cfg, "task", {"regions": regions, "symmetric": symmetric, "fixed_target": fixed_target})()
 
 
+def _flow_strength(value):
+    if value is None:
+        return None
+    try:
+        low, high = (float(v) for v in value)
+    except (TypeError, ValueError) as e:
+        raise ConfigError(f"env.flow_strength must be null or [low, high], e.g. [0.0, 1.0]; got {value}") from e
+    if not 0 <= low <= high:
+        raise ConfigError(f"env.flow_strength needs 0 <= low <= high, e.g. [0.0, 1.0]; got {value}")
+    return low, high
+
+
 def build_env(
     env_cfg: Mapping, flow: FlowField, task, views, num_envs: int | None = None, seed: int = 0, device="cpu"
 ) -> NavigationEnv:
@@ -114,6 +126,7 @@ def build_env(
         reward=reward_cfg,
         misalignment_deg=float(env_cfg.get("misalignment_deg", 0.0)),
         random_flow_phase=bool(env_cfg.get("random_flow_phase", True)),
+        flow_strength=_flow_strength(env_cfg.get("flow_strength")),
         seed=seed,
         device=device,
     )

@@ -433,3 +433,48 @@ def test_privileged_view_reports_the_flow_and_its_phase():
     # A steady flow has no phase: cos = sin = 0.
     steady = NavigationEnv(still_water(), num_envs=4, views=("privileged",)).reset()["privileged"]
     assert torch.equal(steady[:, 12:], torch.zeros(4, 2))
+
+
+def _roll(env, steps=12):
+    torch.manual_seed(0)
+    actions = torch.rand(steps, env.num_envs, 3) * torch.tensor([1.0, 0.4, 0.4]) - torch.tensor([0.0, 0.2, 0.2])
+    td, out = env.reset(), []
+    for a in actions:
+        td["action"] = a
+        td = env.step(td)["next"].clone()
+        out.append(td["position"])
+    return torch.stack(out)
+
+
+def test_flow_strength_one_is_the_flow_itself_and_zero_is_still_water(wake_like_flow):
+    task = ListTask([[2.0, 3.0, 5.0]], [[10.0, -3.0, 5.0]])
+    plain = NavigationEnv(wake_like_flow, task, num_envs=8, random_flow_phase=False)
+    one = NavigationEnv(wake_like_flow, task, num_envs=8, random_flow_phase=False, flow_strength=(1.0, 1.0))
+    assert torch.equal(_roll(plain), _roll(one))  # and the starts and headings drawn are the same
+    zero = NavigationEnv(wake_like_flow, task, num_envs=8, random_flow_phase=False, flow_strength=(0.0, 0.0))
+    still = NavigationEnv(still_water(wake_like_flow.bounds), task, num_envs=8, random_flow_phase=False)
+    assert torch.allclose(_roll(zero), _roll(still), atol=1e-6)
+
+
+def test_flow_strength_scales_each_episode_by_its_own_draw():
+    env = NavigationEnv(
+        UniformFlow((0.5, 0, 0), bounds=BIG), ListTask([[0.0, 0, 0]], [[50.0, 0, 0]]), num_envs=256,
+        flow_strength=(0.2, 0.6),
+    )
+    td = env.reset()
+    s = env.strength
+    assert (s >= 0.2).all() and (s <= 0.6).all() and s.std() > 0.05
+    # at rest in the fluid after a reset: the velocity the swimmer reports is its own episode's flow
+    assert torch.allclose(td["velocity"][:, 0], 0.5 * s)
+    td["action"] = torch.zeros(256, 3)
+    nxt = env.step(td)["next"]
+    assert torch.allclose(nxt["position"][:, 0], 0.5 * s * env.dt, atol=1e-6)
+    with pytest.raises(ValueError, match="flow_strength"):
+        NavigationEnv(still_water(), flow_strength=(0.5, 0.2))
+    with pytest.raises(ConfigError, match="env.flow_strength"):
+        build_env(
+            {"num_envs": 2, "dt": 0.1, "time_limit": 1, "u_max": 1, "flow_strength": [1.0]},
+            still_water(),
+            RegionTask(),
+            ("geo",),
+        )

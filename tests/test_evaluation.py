@@ -199,6 +199,8 @@ def tiny_world(tmp_path_factory):
         ("student_up", "ego_up", "student"),
         ("student_mem", "ego_mem", "student"),
         ("teacher_abc", "geo", "teacher"),
+        ("teacher_robust", "geo_sincos", "teacher"),
+        ("student_robust", "ego", "student"),
     ]:
         pol = DeterministicPolicy(observation_size(view), ACTION_LOW, action_high(), hidden=(16, 16))
         ck[name] = save_policy_checkpoint(root / f"{name}.pt", pol, view, role)

@@ -67,6 +67,9 @@ class NavigationEnv(EnvBase):
         misalignment_deg: rotate the whole scene (flow, domain, obstacles, starts, targets,
             headings) about z through ``rotation_center``: the misaligned-wake test.
         random_flow_phase: start each episode at a random time of a periodic flow.
+        flow_strength: ``(low, high)``: each episode multiplies the flow's velocity by a factor drawn
+            uniformly in [low, high] (0: still water), so a policy meets weak and strong versions of the
+            flow; None: the flow as it is (and the random stream of starts and targets is unchanged).
     """
 
     batch_locked = True
@@ -85,6 +88,7 @@ class NavigationEnv(EnvBase):
         misalignment_deg: float = 0.0,
         rotation_center: tuple[float, float] = (0.0, 0.0),
         random_flow_phase: bool = True,
+        flow_strength: tuple[float, float] | None = None,
         seed: int | None = 0,
         device="cpu",
     ):
@@ -94,6 +98,11 @@ class NavigationEnv(EnvBase):
                 f"num_envs={num_envs}, dt={dt}, time_limit={time_limit}, u_max={u_max}, "
                 f"swim_speed_scale={swim_speed_scale}"
             )
+        if flow_strength is not None:
+            flow_strength = tuple(float(f) for f in flow_strength)
+            if len(flow_strength) != 2 or not 0 <= flow_strength[0] <= flow_strength[1]:
+                raise ValueError(f"flow_strength must be [low, high] with 0 <= low <= high, got {flow_strength}")
+        self.flow_strength = flow_strength
         super().__init__(device=device, batch_size=torch.Size([num_envs]))
         self.views = check_views(views)
         self._ego = needs_body_frame(self.views)
@@ -149,6 +158,7 @@ class NavigationEnv(EnvBase):
         z = lambda *s: torch.zeros(B, *s, device=dev)  # noqa: E731
         self.pos, self.target, self.vel, self.flow_vel = z(3), z(3), z(3), z(3)
         self.theta, self.psi, self.time, self.t0 = z(), z(), z(), z()
+        self.strength = torch.ones(B, device=dev)  # the episode's factor on the flow (flow_strength)
         self.start_dist, self.dist, self.speed = z(), z(), z()
         self.status = torch.zeros(B, dtype=torch.int64, device=dev)
         self.steps = torch.zeros(B, dtype=torch.int64, device=dev)
@@ -192,7 +202,19 @@ class NavigationEnv(EnvBase):
             t0 = torch.rand(n, generator=self.rng, device=self.device) * period
         else:
             t0 = torch.zeros(n, device=self.device)
-        return start, target, wrap_angle(theta), psi, t0
+        strength = torch.ones(n, device=self.device)
+        if self.flow_strength is not None:  # drawn last: the other draws stay those of an env without it
+            low, high = self.flow_strength
+            strength = low + (high - low) * torch.rand(n, generator=self.rng, device=self.device)
+        return start, target, wrap_angle(theta), psi, t0, strength
+
+    def _flow_at(self, pos: Tensor, t: Tensor, idx: Tensor | None = None) -> Tensor:
+        """The flow velocity each swimmer feels: the flow's, times its episode's strength (all or ``idx``)."""
+        u = self.flow.velocity(pos, t)
+        if self.flow_strength is None:
+            return u
+        s = self.strength if idx is None else self.strength[idx]
+        return u * s[:, None]
 
     # ----------------------------------------------------------------- TorchRL API
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
@@ -200,13 +222,14 @@ class NavigationEnv(EnvBase):
         if tensordict is not None and "_reset" in tensordict.keys():
             mask = tensordict.get("_reset").reshape(self.num_envs)
         idx = torch.arange(self.num_envs, device=self.device) if mask is None else mask.nonzero().squeeze(-1)
+        # Out of place: tensors returned by earlier steps must keep their values.
+        put = lambda old, new: old.index_put((idx,), new)  # noqa: E731
         if idx.numel():
-            start, target, theta, psi, t0 = self._sample_episodes(idx.numel())
-            flow_vel = self.flow.velocity(start, t0)
+            start, target, theta, psi, t0, strength = self._sample_episodes(idx.numel())
+            self.strength = put(self.strength, strength)
+            flow_vel = self._flow_at(start, t0, idx)
             d = (target - start).norm(dim=-1)
             zero = torch.zeros_like(d)
-            # Out of place: tensors returned by earlier steps must keep their values.
-            put = lambda old, new: old.index_put((idx,), new)  # noqa: E731
             self.pos, self.target, self.theta, self.psi = (
                 put(self.pos, start),
                 put(self.target, target),
@@ -241,7 +264,7 @@ class NavigationEnv(EnvBase):
         self.pos, _ = move(self.pos, swim, self.flow_vel, self.dt)
         self.steps = self.steps + 1
         self.time = self.steps * self.dt
-        self.flow_vel = self.flow.velocity(self.pos, self.t0 + self.time)
+        self.flow_vel = self._flow_at(self.pos, self.t0 + self.time)
         self.vel = swim + self.flow_vel
         if self._memory:
             self.ring_ptr = (self.ring_ptr + 1) % self.flow_ring.shape[1]

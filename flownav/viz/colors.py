@@ -10,6 +10,8 @@ POLICY_COLORS = {
     "baseline": "tab:gray",
     "student_up": "tab:green",
     "student_mem": "tab:red",
+    "teacher_robust": "tab:cyan",
+    "student_robust": "tab:purple",
 }
 
 
