@@ -127,6 +127,7 @@ def build_env(
         misalignment_deg=float(env_cfg.get("misalignment_deg", 0.0)),
         random_flow_phase=bool(env_cfg.get("random_flow_phase", True)),
         flow_strength=_flow_strength(env_cfg.get("flow_strength")),
+        flow_strength_full=float(env_cfg.get("flow_strength_full", 0.0)),
         seed=seed,
         device=device,
     )

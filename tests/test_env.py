@@ -469,8 +469,14 @@ def test_flow_strength_scales_each_episode_by_its_own_draw():
     td["action"] = torch.zeros(256, 3)
     nxt = env.step(td)["next"]
     assert torch.allclose(nxt["position"][:, 0], 0.5 * s * env.dt, atol=1e-6)
+    half = NavigationEnv(still_water(), num_envs=4000, flow_strength=(0.0, 0.5), flow_strength_full=0.3)
+    half.reset()
+    assert (half.strength == 1).float().mean().item() == pytest.approx(0.3, abs=0.03)
+    assert (half.strength[half.strength < 1] <= 0.5).all()
     with pytest.raises(ValueError, match="flow_strength"):
         NavigationEnv(still_water(), flow_strength=(0.5, 0.2))
+    with pytest.raises(ValueError, match="flow_strength_full"):
+        NavigationEnv(still_water(), flow_strength=(0.0, 1.0), flow_strength_full=1.5)
     with pytest.raises(ConfigError, match="env.flow_strength"):
         build_env(
             {"num_envs": 2, "dt": 0.1, "time_limit": 1, "u_max": 1, "flow_strength": [1.0]},

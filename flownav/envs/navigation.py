@@ -70,6 +70,8 @@ class NavigationEnv(EnvBase):
         flow_strength: ``(low, high)``: each episode multiplies the flow's velocity by a factor drawn
             uniformly in [low, high] (0: still water), so a policy meets weak and strong versions of the
             flow; None: the flow as it is (and the random stream of starts and targets is unchanged).
+        flow_strength_full: the fraction of episodes that get the flow at full strength (1) instead of a
+            draw in ``flow_strength``, so the hardest case keeps its weight in training.
     """
 
     batch_locked = True
@@ -89,6 +91,7 @@ class NavigationEnv(EnvBase):
         rotation_center: tuple[float, float] = (0.0, 0.0),
         random_flow_phase: bool = True,
         flow_strength: tuple[float, float] | None = None,
+        flow_strength_full: float = 0.0,
         seed: int | None = 0,
         device="cpu",
     ):
@@ -102,7 +105,9 @@ class NavigationEnv(EnvBase):
             flow_strength = tuple(float(f) for f in flow_strength)
             if len(flow_strength) != 2 or not 0 <= flow_strength[0] <= flow_strength[1]:
                 raise ValueError(f"flow_strength must be [low, high] with 0 <= low <= high, got {flow_strength}")
-        self.flow_strength = flow_strength
+        if not 0 <= flow_strength_full <= 1:
+            raise ValueError(f"flow_strength_full is a fraction in [0, 1], got {flow_strength_full}")
+        self.flow_strength, self.flow_strength_full = flow_strength, float(flow_strength_full)
         super().__init__(device=device, batch_size=torch.Size([num_envs]))
         self.views = check_views(views)
         self._ego = needs_body_frame(self.views)
@@ -206,6 +211,9 @@ class NavigationEnv(EnvBase):
         if self.flow_strength is not None:  # drawn last: the other draws stay those of an env without it
             low, high = self.flow_strength
             strength = low + (high - low) * torch.rand(n, generator=self.rng, device=self.device)
+            if self.flow_strength_full:
+                full = torch.rand(n, generator=self.rng, device=self.device) < self.flow_strength_full
+                strength = torch.where(full, torch.ones_like(strength), strength)
         return start, target, wrap_angle(theta), psi, t0, strength
 
     def _flow_at(self, pos: Tensor, t: Tensor, idx: Tensor | None = None) -> Tensor:
