@@ -344,9 +344,12 @@ def test_missing_checkpoints_are_skipped_with_the_command(tiny_world, tmp_path):
         f"policies.baseline.checkpoint={ck['baseline']}",
         f"policies.student_up.checkpoint={ck['student_up']}",
         f"policies.student_mem.checkpoint={ck['student_mem']}",
+        f"policies.teacher_robust.checkpoint={ck['teacher_robust']}",
+        f"policies.student_robust.checkpoint={ck['student_robust']}",
     )
     r = evaluate.run(cfg, log=lambda *_: None)["training"]
-    expected = {"student", "baseline", "student_up", "student_mem", "head_to_target", "passive"}
+    expected = {"student", "baseline", "student_up", "student_mem", "teacher_robust", "student_robust"}
+    expected |= {"head_to_target", "passive"}
     assert set(r["results"]) == expected  # no teacher file
     assert any("python train.py +experiment=teacher" in m for m in r["missing"])
     assert "python train.py +experiment=teacher" in (tmp_path / "R.md").read_text()
