@@ -45,7 +45,7 @@ def plain_collect(env, policy, view: str, steps: int) -> float:
     """Collection with plain tensors: the env's physics functions, its reset sampler, the same MLP."""
     B, dt, cfg, flow = env.num_envs, env.dt, env.reward_cfg, env.flow
     low, high = env.action_spec.space.low[0], env.action_spec.space.high[0]
-    pos, target, theta, psi, t0 = env._sample_episodes(B)
+    pos, target, theta, psi, t0, _ = env._sample_episodes(B)  # the benchmark env has no flow_strength
     time_ = torch.zeros(B)
     flow_vel = flow.velocity(pos, t0)
     vel = flow_vel.clone()
@@ -79,7 +79,7 @@ def plain_collect(env, policy, view: str, steps: int) -> float:
             done = success | ~flow.in_domain(pos) | flow.in_obstacle(pos) | (time_ >= env.time_limit - 1e-6)
             if done.any():
                 idx = done.nonzero().squeeze(-1)
-                p, tg, th, ps, tt = env._sample_episodes(idx.numel())
+                p, tg, th, ps, tt, _ = env._sample_episodes(idx.numel())
                 pos, target, theta, psi, t0 = (
                     pos.index_put((idx,), p),
                     target.index_put((idx,), tg),
