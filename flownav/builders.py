@@ -106,6 +106,13 @@ def _flow_strength(value):
     return low, high
 
 
+def _fraction(value, key: str) -> float:
+    try:
+        return float(value or 0.0)
+    except (TypeError, ValueError) as e:
+        raise ConfigError(f"{key} must be a fraction in [0, 1], e.g. 0.5; got {value}") from e
+
+
 def build_env(
     env_cfg: Mapping, flow: FlowField, task, views, num_envs: int | None = None, seed: int = 0, device="cpu"
 ) -> NavigationEnv:
@@ -127,7 +134,7 @@ def build_env(
         misalignment_deg=float(env_cfg.get("misalignment_deg", 0.0)),
         random_flow_phase=bool(env_cfg.get("random_flow_phase", True)),
         flow_strength=_flow_strength(env_cfg.get("flow_strength")),
-        flow_strength_full=float(env_cfg.get("flow_strength_full", 0.0)),
+        flow_strength_full=_fraction(env_cfg.get("flow_strength_full", 0.0), "env.flow_strength_full"),
         seed=seed,
         device=device,
     )

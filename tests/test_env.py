@@ -450,7 +450,7 @@ def test_flow_strength_one_is_the_flow_itself_and_zero_is_still_water(wake_like_
     task = ListTask([[2.0, 3.0, 5.0]], [[10.0, -3.0, 5.0]])
     plain = NavigationEnv(wake_like_flow, task, num_envs=8, random_flow_phase=False)
     one = NavigationEnv(wake_like_flow, task, num_envs=8, random_flow_phase=False, flow_strength=(1.0, 1.0))
-    assert torch.equal(_roll(plain), _roll(one))  # and the starts and headings drawn are the same
+    assert torch.equal(_roll(plain), _roll(one))  # and the first reset's starts and headings are the same
     zero = NavigationEnv(wake_like_flow, task, num_envs=8, random_flow_phase=False, flow_strength=(0.0, 0.0))
     still = NavigationEnv(still_water(wake_like_flow.bounds), task, num_envs=8, random_flow_phase=False)
     assert torch.allclose(_roll(zero), _roll(still), atol=1e-6)
@@ -477,6 +477,8 @@ def test_flow_strength_scales_each_episode_by_its_own_draw():
         NavigationEnv(still_water(), flow_strength=(0.5, 0.2))
     with pytest.raises(ValueError, match="flow_strength_full"):
         NavigationEnv(still_water(), flow_strength=(0.0, 1.0), flow_strength_full=1.5)
+    with pytest.raises(ValueError, match="flow_strength_full needs flow_strength"):
+        NavigationEnv(still_water(), flow_strength_full=0.5)
     with pytest.raises(ConfigError, match="env.flow_strength"):
         build_env(
             {"num_envs": 2, "dt": 0.1, "time_limit": 1, "u_max": 1, "flow_strength": [1.0]},

@@ -69,7 +69,8 @@ class NavigationEnv(EnvBase):
         random_flow_phase: start each episode at a random time of a periodic flow.
         flow_strength: ``(low, high)``: each episode multiplies the flow's velocity by a factor drawn
             uniformly in [low, high] (0: still water), so a policy meets weak and strong versions of the
-            flow; None: the flow as it is (and the random stream of starts and targets is unchanged).
+            flow; None: the flow as it is. The strength is drawn after the episode's other draws, so the
+            first reset's starts, targets and headings are those of an env without it (later ones differ).
         flow_strength_full: the fraction of episodes that get the flow at full strength (1) instead of a
             draw in ``flow_strength``, so the hardest case keeps its weight in training.
     """
@@ -107,6 +108,8 @@ class NavigationEnv(EnvBase):
                 raise ValueError(f"flow_strength must be [low, high] with 0 <= low <= high, got {flow_strength}")
         if not 0 <= flow_strength_full <= 1:
             raise ValueError(f"flow_strength_full is a fraction in [0, 1], got {flow_strength_full}")
+        if flow_strength_full and flow_strength is None:
+            raise ValueError("flow_strength_full needs flow_strength=[low, high] (the draw it replaces)")
         self.flow_strength, self.flow_strength_full = flow_strength, float(flow_strength_full)
         super().__init__(device=device, batch_size=torch.Size([num_envs]))
         self.views = check_views(views)
@@ -208,7 +211,7 @@ class NavigationEnv(EnvBase):
         else:
             t0 = torch.zeros(n, device=self.device)
         strength = torch.ones(n, device=self.device)
-        if self.flow_strength is not None:  # drawn last: the other draws stay those of an env without it
+        if self.flow_strength is not None:  # drawn last: this batch's other draws are those of an env without it
             low, high = self.flow_strength
             strength = low + (high - low) * torch.rand(n, generator=self.rng, device=self.device)
             if self.flow_strength_full:
