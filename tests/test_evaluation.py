@@ -201,6 +201,7 @@ def tiny_world(tmp_path_factory):
         ("teacher_abc", "geo", "teacher"),
         ("teacher_robust", "geo_sincos", "teacher"),
         ("student_robust", "ego", "student"),
+        ("student_mem_robust", "ego_mem", "student"),
     ]:
         pol = DeterministicPolicy(observation_size(view), ACTION_LOW, action_high(), hidden=(16, 16))
         ck[name] = save_policy_checkpoint(root / f"{name}.pt", pol, view, role)
@@ -346,9 +347,11 @@ def test_missing_checkpoints_are_skipped_with_the_command(tiny_world, tmp_path):
         f"policies.student_mem.checkpoint={ck['student_mem']}",
         f"policies.teacher_robust.checkpoint={ck['teacher_robust']}",
         f"policies.student_robust.checkpoint={ck['student_robust']}",
+        f"policies.student_mem_robust.checkpoint={ck['student_mem_robust']}",
     )
     r = evaluate.run(cfg, log=lambda *_: None)["training"]
     expected = {"student", "baseline", "student_up", "student_mem", "teacher_robust", "student_robust"}
+    expected |= {"student_mem_robust"}
     expected |= {"head_to_target", "passive"}
     assert set(r["results"]) == expected  # no teacher file
     assert any("python train.py +experiment=teacher" in m for m in r["missing"])

@@ -12,6 +12,7 @@ POLICY_COLORS = {
     "student_mem": "tab:red",
     "teacher_robust": "tab:cyan",
     "student_robust": "tab:purple",
+    "student_mem_robust": "tab:brown",
 }
 
 
