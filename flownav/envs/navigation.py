@@ -210,7 +210,7 @@ class NavigationEnv(EnvBase):
             t0 = torch.rand(n, generator=self.rng, device=self.device) * period
         else:
             t0 = torch.zeros(n, device=self.device)
-        strength = torch.ones(n, device=self.device)
+        strength = None  # the flow as it is: self.strength stays 1 and is never read
         if self.flow_strength is not None:  # drawn last: this batch's other draws are those of an env without it
             low, high = self.flow_strength
             strength = low + (high - low) * torch.rand(n, generator=self.rng, device=self.device)
@@ -237,7 +237,8 @@ class NavigationEnv(EnvBase):
         put = lambda old, new: old.index_put((idx,), new)  # noqa: E731
         if idx.numel():
             start, target, theta, psi, t0, strength = self._sample_episodes(idx.numel())
-            self.strength = put(self.strength, strength)
+            if strength is not None:
+                self.strength = put(self.strength, strength)
             flow_vel = self._flow_at(start, t0, idx)
             d = (target - start).norm(dim=-1)
             zero = torch.zeros_like(d)
