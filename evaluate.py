@@ -29,12 +29,9 @@ from flownav.evaluation.metrics import summarize
 from flownav.evaluation.rollout import run_episodes
 from flownav.paths import resolve
 
-EVAL_CONF = Path(__file__).resolve().parent / "conf" / "evaluate"
-
 
 def command_line() -> str:
-    args = [a for a in sys.argv[1:] if not a.startswith("hydra.searchpath")]
-    return "python evaluate.py " + " ".join(shlex.quote(a) for a in args)
+    return "python evaluate.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
 
 
 def evaluate_checkpoint(cfg: DictConfig, log=print) -> dict:
@@ -125,14 +122,11 @@ KNOWN_KEYS = {
 }
 
 
-@hydra.main(version_base="1.3", config_path="conf", config_name="evaluate")
+@hydra.main(version_base="1.3", config_path="conf/evaluate", config_name="config")
 def main(cfg: DictConfig) -> None:
     OmegaConf.set_readonly(cfg, False)
     run(cfg)
 
 
 if __name__ == "__main__":
-    # The suite's configs live in conf/evaluate/experiment; make that findable from any working directory.
-    if not any(a.startswith("hydra.searchpath") for a in sys.argv[1:]):
-        sys.argv.append(f"hydra.searchpath=[file://{EVAL_CONF}]")
     main()

@@ -23,8 +23,7 @@ from flownav.flows import Box, Cylinder, FunctionFlow, UniformFlow, save_grid_fl
 from flownav.flows.base import WAKE_BOUNDS
 
 ROOT = Path(__file__).resolve().parents[1]
-CONF = str(ROOT / "conf")
-SEARCH = f"hydra.searchpath=[file://{ROOT / 'conf' / 'evaluate'}]"
+EVAL_CONF = str(ROOT / "conf" / "evaluate")  # evaluate.py's config dir
 
 
 def env_factory(flow, task, views=("geo",), **kw):
@@ -209,8 +208,8 @@ def tiny_world(tmp_path_factory):
 
 
 def compose_eval(*overrides):
-    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
-        return compose("evaluate", overrides=[SEARCH, *overrides])
+    with initialize_config_dir(config_dir=EVAL_CONF, version_base="1.3"):
+        return compose("config", overrides=list(overrides))
 
 
 def tiny_overrides(root, data, ck):
