@@ -1,4 +1,6 @@
-"""train.py's Hydra configs: every experiment composes, launchers compose, bad input fails at start."""
+"""The two Hydra apps' configs: every training experiment passes the start checks and writes its own files,
+every policy of the evaluation suite resolves to its checkpoint and experiment, the apps keep separate
+namespaces, launchers are installed plugins, bad input fails at start."""
 
 from __future__ import annotations
 
@@ -9,10 +11,12 @@ from pathlib import Path
 import pytest
 from hydra import compose, initialize_config_dir
 from hydra.errors import ConfigCompositionException
+from omegaconf import OmegaConf
 from omegaconf.errors import ConfigKeyError
 
 ROOT = Path(__file__).resolve().parents[1]
-CONF = str(ROOT / "conf")
+CONF = str(ROOT / "conf")  # train.py's config dir
+EVAL_CONF = str(ROOT / "conf" / "evaluate")  # evaluate.py's
 EXPERIMENTS = sorted(p.stem for p in (ROOT / "conf" / "experiment").glob("*.yaml"))
 
 
@@ -21,33 +25,64 @@ def cfg_of(*overrides, hydra=False):
         return compose("config", overrides=list(overrides), return_hydra_config=hydra)
 
 
-@pytest.mark.parametrize("experiment", EXPERIMENTS)
-def test_every_experiment_composes(experiment):
-    cfg = cfg_of(f"+experiment={experiment}")
-    for key in ("seed", "device", "threads", "teacher_checkpoint", "resume", "checkpoint_every", "output_checkpoint"):
-        assert key in cfg
-    assert cfg.algo.name in ("ppo", "dagger")
-    assert cfg.name == experiment.split("_")[0] or cfg.name == experiment or cfg.name.startswith("student")
+def eval_cfg(*overrides):
+    with initialize_config_dir(config_dir=EVAL_CONF, version_base="1.3"):
+        return compose("config", overrides=list(overrides))
 
 
-def test_teacher_and_baseline_differ_only_in_view():
-    t, b = cfg_of("+experiment=teacher"), cfg_of("+experiment=baseline_ego")
-    assert (t.obs.view, b.obs.view) == ("geo_sincos", "ego")
-    assert t.algo == b.algo and t.env == b.env and t.flow == b.flow and t.task == b.task
-    assert t.flow.type == "grid"  # the default flow is the CFD wake
+def test_every_experiment_passes_the_start_checks_and_writes_its_own_files():
+    from train import validate
+
+    cfgs = {e: cfg_of(f"+experiment={e}") for e in EXPERIMENTS}
+    for cfg in cfgs.values():
+        validate(cfg)
+    # Two experiments sharing a run name, shipped checkpoint or results file would overwrite each other.
+    for key in ("name", "output_checkpoint", "algo.results_json"):
+        values = [OmegaConf.select(c, key) for c in cfgs.values()]
+        values = [v for v in values if v is not None]
+        assert len(values) == len(set(values)), f"{key} repeats across experiments: {sorted(values)}"
 
 
-def test_local_launcher_is_joblib_two_jobs():
-    cfg = cfg_of("+experiment=teacher", hydra=True)
-    assert "joblib" in cfg.hydra.launcher._target_.lower()
-    assert cfg.hydra.launcher.n_jobs == 2
+def test_every_suite_policy_resolves_to_its_checkpoint_and_experiment():
+    """Each policy evaluate.py names is a shipped checkpoint of the stated view, made by the experiment it names."""
+    from flownav.checkpoint import load_policy
+
+    for name, pol in eval_cfg().policies.items():
+        if pol.get("scripted"):
+            continue
+        load_policy(ROOT / pol.checkpoint, expect_obs=pol.obs)  # refuses a missing file or another view
+        experiment = pol.command.removeprefix("python train.py +experiment=")
+        assert experiment in EXPERIMENTS, f"policy {name}: {pol.command!r} names no experiment"
+        cfg = cfg_of(f"+experiment={experiment}")
+        assert cfg.obs.view == pol.obs, name
+        assert cfg.output_checkpoint in (None, pol.checkpoint), name
+        if cfg.algo.name == "dagger":  # the teacher it imitates is shipped too
+            load_policy(ROOT / cfg.teacher_checkpoint)
 
 
-def test_slurm_launcher_composes():
-    cfg = cfg_of("+experiment=teacher", "hydra/launcher=slurm", hydra=True)
-    launcher = cfg.hydra.launcher
-    assert "submitit" in launcher._target_.lower() and "slurm" in launcher._target_.lower()
-    assert launcher.cpus_per_task >= 1 and launcher.timeout_min > 0
+@pytest.mark.parametrize("launcher", ["local", "slurm"])
+def test_launcher_is_an_installed_hydra_plugin(launcher):
+    from hydra.utils import get_class
+
+    cfg = cfg_of("+experiment=teacher", f"hydra/launcher={launcher}", hydra=True)
+    get_class(cfg.hydra.launcher._target_)  # raises if the plugin package is missing
+
+
+def run_app(*args):
+    return subprocess.run([sys.executable, *args], cwd=ROOT, capture_output=True, text=True, timeout=120)
+
+
+def test_each_app_lists_only_its_own_experiments_and_takes_hydra_flags_after_overrides():
+    out = run_app("evaluate.py", "+experiment=paper_abc", "--cfg", "job")
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "abc:" in out.stdout
+    out = run_app("evaluate.py", "+experiment=teacher")
+    assert out.returncode != 0 and "Could not find 'experiment/teacher'" in out.stderr
+    out = run_app("train.py", "+experiment=paper", "--cfg", "job")
+    assert out.returncode != 0 and "Could not find 'experiment/paper'" in out.stderr
+    text = run_app("evaluate.py", "--help").stdout
+    assert text.startswith("evaluate.py: ") and "paper_abc" in text
+    assert not any(line.startswith(("algo:", "obs:", "logger:")) for line in text.splitlines())
 
 
 @pytest.mark.parametrize("override", ["foo=1", "algo.nonexistent=3", "env.reward.bogus=1"])
