@@ -41,8 +41,11 @@ from flownav.envs.observations import State, compute_views  # noqa: E402
 from flownav.envs.reward import step_reward  # noqa: E402
 
 
-def plain_collect(env, policy, view: str, steps: int) -> float:
-    """Collection with plain tensors: the env's physics functions, its reset sampler, the same MLP."""
+def plain_collect(env, policy, view: str, steps: int, record: list | None = None) -> float:
+    """Collection with plain tensors: the env's physics functions, its reset sampler, the same MLP.
+
+    ``record`` (tests) receives each step's (observation, action).
+    """
     B, dt, cfg, flow = env.num_envs, env.dt, env.reward_cfg, env.flow
     low, high = env.action_spec.space.low[0], env.action_spec.space.high[0]
     pos, target, theta, psi, t0, _ = env._sample_episodes(B)  # the benchmark env has no flow_strength
@@ -64,6 +67,8 @@ def plain_collect(env, policy, view: str, steps: int) -> float:
             loc, scale = out[:, :3], torch.nn.functional.softplus(out[:, 3:] + 0.0) + 1e-3
             u = torch.tanh(loc + scale * torch.randn_like(loc))
             action = low + (high - low) * (u + 1) / 2
+            if record is not None:
+                record.append((obs, action))
             logp = torch.distributions.Normal(loc, scale).log_prob(torch.atanh(u.clamp(-0.999, 0.999))).sum(-1)
             del logp
             theta, psi = turn(theta, psi, action[:, 1], action[:, 2], dt)
