@@ -27,28 +27,12 @@ from common import machine, write_result  # noqa: E402
 
 from flownav.envs import NavigationEnv  # noqa: E402
 from flownav.envs.tasks import REGION_1, REGION_2  # noqa: E402
-from flownav.flows import ABCFlow, GridFlow  # noqa: E402
+from flownav.flows import GridFlow  # noqa: E402
 from flownav.flows.base import WAKE_BOUNDS  # noqa: E402
+from flownav.flows.synthetic import synthetic_wake_grid  # noqa: E402
 
 SHAPE = (32, 128, 96, 96)  # frames, Nx, Ny, Nz: 1.18M grid points
 DT_FRAME = 0.25
-
-
-def make_grid() -> tuple[np.ndarray, tuple, tuple]:
-    """A smooth unsteady field over the wake box: a free stream plus a drifting ABC pattern."""
-    T, nx, ny, nz = SHAPE
-    lo, hi = WAKE_BOUNDS.lo, WAKE_BOUNDS.hi
-    spacing = tuple((h - l) / (n - 1) for l, h, n in zip(lo, hi, (nx, ny, nz), strict=True))
-    axes = [torch.linspace(l, h, n) for l, h, n in zip(lo, hi, (nx, ny, nz), strict=True)]
-    pts = torch.stack(torch.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-    abc = ABCFlow()
-    frames = []
-    for f in range(T):
-        shift = torch.tensor([2 * math.pi * f / T, 0.0, 0.0])
-        v = 0.6 * abc.velocity(pts - shift, torch.full((pts.shape[0],), f * DT_FRAME))
-        v[:, 0] += 0.5
-        frames.append(v.reshape(nx, ny, nz, 3))
-    return torch.stack(frames).numpy(), lo, spacing
 
 
 def best_window_rate(step, per_call: int, seconds: float, windows: int = 5) -> float:
@@ -165,9 +149,10 @@ def main():
     parser.add_argument("--batches", type=int, nargs="+", default=[1024, 4096, 16384, 65536])
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
-    grid, origin, spacing = make_grid()
-    flow = GridFlow(torch.from_numpy(grid), origin, spacing, DT_FRAME, periodic=(False, False, True))
-    reference = bench_reference(grid.astype(np.float64), origin, spacing, args.seconds)
+    T, nx, ny, nz = SHAPE
+    grid = synthetic_wake_grid(frames=T, cells=(nx, ny), span_cells=nz, span=20.0, frame_dt=DT_FRAME)
+    flow = GridFlow(**grid)
+    reference = bench_reference(grid["velocity"].astype(np.float64), grid["origin"], grid["spacing"], args.seconds)
     print(f"reference per-swimmer numpy loop: {reference:,.0f} swimmer-steps/s")
     rows = []
     for batch in args.batches:

@@ -29,27 +29,10 @@ from flownav.envs import NavigationEnv, RegionTask  # noqa: E402
 from flownav.evaluation.metrics import summarize  # noqa: E402
 from flownav.evaluation.rollout import run_episodes  # noqa: E402
 from flownav.evaluation.scripted import ACTION_LOW, action_high  # noqa: E402
-from flownav.flows import GridFlow  # noqa: E402
-from flownav.flows.base import WAKE_BOUNDS, Cylinder  # noqa: E402
+from flownav.flows.synthetic import synthetic_wake  # noqa: E402
 
 EPISODES = 10_000
 TARGET_S = 60.0
-
-
-def synthetic_wake(frames: int = 40, spacing: float = 0.2, span: float = 4.0) -> GridFlow:
-    lo, hi = WAKE_BOUNDS.lo, WAKE_BOUNDS.hi
-    nx, ny, nz = round((hi[0] - lo[0]) / spacing) + 1, round((hi[1] - lo[1]) / spacing) + 1, round(span / spacing)
-    g = torch.Generator().manual_seed(0)
-    vel = 0.002 * torch.randn(frames, nx, ny, nz, 3, generator=g)
-    return GridFlow(
-        vel,
-        origin=lo,
-        spacing=(spacing, spacing, spacing),
-        dt=0.25,
-        periodic=(False, False, True),
-        bounds=WAKE_BOUNDS,
-        obstacles=[Cylinder((0.0, 0.0), 0.5)],
-    )
 
 
 class Hover(torch.nn.Module):
@@ -99,7 +82,7 @@ def main() -> None:
         out["load_average_at_start"] = [float(x) for x in load]
     except OSError:
         pass
-    flow = synthetic_wake()
+    flow = synthetic_wake(frames=40, cells=(131, 71), span_cells=20, span=4.0, frame_dt=0.25, strength=0.002)
     student = DeterministicPolicy(6, ACTION_LOW, action_high(), hidden=(256, 256))
     teacher = DeterministicPolicy(8, ACTION_LOW, action_high(), hidden=(128, 128), n_outputs=6)
     for threads in (1, 2):

@@ -21,6 +21,7 @@ from flownav.evaluation.rollout import run_episodes
 from flownav.evaluation.scripted import ACTION_LOW, HeadToTarget, action_high
 from flownav.flows import Box, Cylinder, FunctionFlow, UniformFlow, save_grid_flow
 from flownav.flows.base import WAKE_BOUNDS
+from flownav.flows.synthetic import synthetic_wake_grid
 
 ROOT = Path(__file__).resolve().parents[1]
 EVAL_CONF = str(ROOT / "conf" / "evaluate")  # evaluate.py's config dir
@@ -166,25 +167,7 @@ def test_ego_outcomes_do_not_depend_on_the_misalignment():
 def tiny_world(tmp_path_factory):
     """A small grid wake dataset and throwaway checkpoints of every view."""
     root = tmp_path_factory.mktemp("eval")
-    T, nx, ny, nz = 4, 21, 13, 6
-    lo, hi = WAKE_BOUNDS.lo, WAKE_BOUNDS.hi
-    x = np.linspace(lo[0], hi[0], nx)[None, :, None, None]
-    y = np.linspace(lo[1], hi[1], ny)[None, None, :, None]
-    t = np.arange(T)[:, None, None, None] / T * 2 * np.pi
-    u = 0.8 + 0.2 * np.sin(y + t) + 0 * x
-    v = 0.2 * np.sin(0.5 * x - t) + 0 * y
-    w = 0.05 * np.cos(x + t) + 0 * y
-    vel = np.stack(np.broadcast_arrays(u, v, w), -1) * np.ones((1, 1, 1, nz, 1))
-    data = save_grid_flow(
-        root / "wake",
-        vel.astype(np.float32),
-        origin=lo,
-        spacing=((hi[0] - lo[0]) / (nx - 1), (hi[1] - lo[1]) / (ny - 1), 2.0),
-        dt=1.0,
-        periodic=(False, False, True),
-        bounds=WAKE_BOUNDS,
-        obstacles=[Cylinder((0.0, 0.0), 0.5)],
-    )
+    data = save_grid_flow(root / "wake", **synthetic_wake_grid(frames=4, span_cells=6, span=12.0, frame_dt=1.0))
     torch.manual_seed(0)
     ck = {}
     for name, view, role in [
