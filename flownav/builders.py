@@ -31,7 +31,7 @@ def _box(value, key: str) -> Box:
     return box
 
 
-def _scale_pi(value, key: str):
+def _scale_pi(value):
     """Boxes of the ABC task are given in units of pi when ``in_pi`` is set."""
     return [[float(x) * math.pi for x in corner] for corner in value]
 
@@ -51,7 +51,7 @@ def build_flow(cfg: Mapping, device="cpu") -> FlowField:
     def abc():
         kw = {k: float(cfg[k]) for k in ("A", "B", "C", "eps", "omega") if cfg.get(k) is not None}
         if cfg.get("bounds") is not None:
-            kw["bounds"] = _box(_scale_pi(cfg["bounds"], "flow.bounds"), "flow.bounds")
+            kw["bounds"] = _box(_scale_pi(cfg["bounds"]), "flow.bounds")
         return ABCFlow(**kw)
 
     def uniform():
@@ -76,7 +76,7 @@ def build_flow(cfg: Mapping, device="cpu") -> FlowField:
 
 
 def build_task(cfg: Mapping, flow: FlowField):
-    conv = (lambda v, k: _box(_scale_pi(v, k), k)) if cfg.get("in_pi") else _box
+    conv = (lambda v, k: _box(_scale_pi(v), k)) if cfg.get("in_pi") else _box
 
     def regions():
         return RegionTask(conv(cfg["start"], "task.start"), conv(cfg["target"], "task.target"))

@@ -1,12 +1,9 @@
-"""Where the repository keeps its data, checkpoints and results."""
+"""Paths relative to the repository: its root, the default flow dataset, and how a relative path resolves."""
 
 from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-DATA_DIR = REPO_ROOT / "data"
-DEFAULT_FLOW_DATASET = DATA_DIR / "cylinder_re300"
-CHECKPOINT_DIR = REPO_ROOT / "checkpoints"
-RESULTS_DIR = REPO_ROOT / "results"
+DEFAULT_FLOW_DATASET = REPO_ROOT / "data" / "cylinder_re300"
 
 
 def resolve(path: str | Path, base: Path = REPO_ROOT) -> Path:
