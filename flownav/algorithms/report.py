@@ -1,4 +1,4 @@
-"""Numbers and the figure of issue 4: held-out success of trained policies, reward curves of seeds.
+"""Held-out success of trained policies (and shipping the best seed), reward curves over seeds.
 
     # success on 10,000 held-out episodes of the training task, one entry per checkpoint
     python -m flownav.algorithms.report eval --name teacher --out results/teacher.json \\
