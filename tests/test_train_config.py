@@ -68,18 +68,22 @@ def test_launcher_is_an_installed_hydra_plugin(launcher):
     get_class(cfg.hydra.launcher._target_)  # raises if the plugin package is missing
 
 
-def run_app(*args):
-    return subprocess.run([sys.executable, *args], cwd=ROOT, capture_output=True, text=True, timeout=120)
+def run_app(*args, timeout=120):
+    """Run an entry point of the repository as a user would."""
+    return subprocess.run([sys.executable, *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout)
 
 
-def test_each_app_lists_only_its_own_experiments_and_takes_hydra_flags_after_overrides():
+def test_each_app_rejects_the_other_apps_experiments():
+    with pytest.raises(ConfigCompositionException, match="Could not find 'experiment/teacher'"):
+        eval_cfg("+experiment=teacher")
+    with pytest.raises(ConfigCompositionException, match="Could not find 'experiment/paper'"):
+        cfg_of("+experiment=paper")
+
+
+def test_evaluate_takes_hydra_flags_after_overrides_and_lists_only_its_groups():
     out = run_app("evaluate.py", "+experiment=paper_abc", "--cfg", "job")
     assert out.returncode == 0, out.stderr[-2000:]
     assert "abc:" in out.stdout
-    out = run_app("evaluate.py", "+experiment=teacher")
-    assert out.returncode != 0 and "Could not find 'experiment/teacher'" in out.stderr
-    out = run_app("train.py", "+experiment=paper", "--cfg", "job")
-    assert out.returncode != 0 and "Could not find 'experiment/paper'" in out.stderr
     text = run_app("evaluate.py", "--help").stdout
     assert text.startswith("evaluate.py: ") and "paper_abc" in text
     assert not any(line.startswith(("algo:", "obs:", "logger:")) for line in text.splitlines())
@@ -92,13 +96,7 @@ def test_unknown_key_fails(override):
 
 
 def test_unknown_key_fails_on_the_command_line():
-    out = subprocess.run(
-        [sys.executable, "train.py", "+experiment=teacher", "algo.lrr=1e-3"],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    out = run_app("train.py", "+experiment=teacher", "algo.lrr=1e-3")
     assert out.returncode != 0 and "lrr" in out.stderr
 
 
@@ -148,12 +146,8 @@ def test_multirun_two_seeds_with_joblib(tmp_path):
         "logger=csv",
         "logger.progress=false",
     ]
-    out = subprocess.run(
-        [sys.executable, "train.py", "-m", "+experiment=teacher", "seed=0,1", *tiny, f"hydra.sweep.dir={tmp_path}"],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
+    out = run_app(
+        "train.py", "-m", "+experiment=teacher", "seed=0,1", *tiny, f"hydra.sweep.dir={tmp_path}", timeout=300
     )
     assert out.returncode == 0, out.stderr[-3000:]
     runs = sorted(tmp_path.glob("seed*"))
