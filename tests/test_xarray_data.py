@@ -129,7 +129,8 @@ def test_unknown_units_and_missing_variables_are_named():
         load_xarray_flow(dataset(speed="knots"))
     with pytest.raises(GridFlowError, match=r"^coordinate 'x' has units 'ft'"):
         load_xarray_flow(dataset(length="ft"))
-    with pytest.raises(GridFlowError, match=re.escape("no variable for u in ['east', 'north']: pass variables={'u': '<name>'}")):
+    missing = "no variable for u in ['east', 'north']: pass variables={'u': '<name>'}"
+    with pytest.raises(GridFlowError, match=re.escape(missing)):
         load_xarray_flow(dataset(names=["east", "north"]))
     flow = load_xarray_flow(dataset(names=["east", "north"]), variables={"u": "east", "v": "north"})
     assert flow.meta["variables"] == {"u": "east", "v": "north"}

@@ -3,8 +3,9 @@
 Interpolation is trilinear in space and linear in time. ``time_mode`` says what happens past the
 data: ``"looped"`` (the default) loops with period ``T * dt`` (frame ``T`` is frame ``0`` again), so a
 CFD window whose end matches its start gives a seamless, infinitely long flow; ``"clamped"`` holds the
-first and last frames before ``0`` and after ``(T - 1) * dt``; ``"error"`` raises there. Spatial axes can be periodic (period ``N * spacing``,
-the spanwise axis of the cylinder wake); on the other axes positions are clamped to the grid.
+first and last frames before ``0`` and after ``(T - 1) * dt``; ``"error"`` raises there. Spatial
+axes can be periodic (period ``N * spacing``, the spanwise axis of the cylinder wake); on the other
+axes positions are clamped to the grid.
 Both are exact for fields linear in x, y, z and t (away from a periodic seam).
 
 On-disk format ``flownav-grid-v1``: a directory holding
