@@ -156,9 +156,9 @@ def plot_velocity_traces(runs: dict, out: Path) -> str:
             axes[r][j].axhline(0, color="k", lw=0.5)
             axes[r][j].grid(alpha=0.3)
             axes[r][j].legend(fontsize=7)
-        axes[1][j].set_xlabel("t")
-    axes[0][0].set_ylabel("inertial (geo) velocity")
-    axes[1][0].set_ylabel("body-frame (ego) velocity")
+        axes[1][j].set_xlabel("t (D / U)")
+    axes[0][0].set_ylabel("inertial (geo) velocity / U")
+    axes[1][0].set_ylabel("body-frame (ego) velocity / U")
     fig.tight_layout()
     fig.savefig(out, dpi=120)
     plt.close(fig)
@@ -190,8 +190,13 @@ def plot_misaligned(runs: dict, flow, out: Path) -> str:
     out.parent.mkdir(parents=True, exist_ok=True)
     pols = list(dict.fromkeys(k[0] for k in runs))
     angles = list(dict.fromkeys(k[1] for k in runs))
-    fig, axes = plt.subplots(len(pols), len(angles), figsize=(3.2 * len(angles), 3.0 * len(pols)), squeeze=False)
+    fig, axes = plt.subplots(
+        len(pols), len(angles), figsize=(3.2 * len(angles), 3.0 * len(pols) + 0.4), squeeze=False, layout="constrained"
+    )
     box = _rotated_box(flow)
+    # One extent for every panel (the union of the rotated domains): panels of equal size and scale.
+    corners = torch.cat([rotate_z(box, math.radians(a), (0.0, 0.0)) for a in angles]).numpy()
+    lo, hi = corners.min(0) - 0.5, corners.max(0) + 0.5
     for r, pol in enumerate(pols):
         for c, angle in enumerate(angles):
             ax = axes[r][c]
@@ -210,10 +215,16 @@ def plot_misaligned(runs: dict, flow, out: Path) -> str:
                 ax.plot(p[0, 0], p[0, 1], "o", color=f"C{i}", ms=3)
                 tg = traj["target"][i].numpy()
                 ax.plot(tg[0], tg[1], "*", color=f"C{i}", ms=9, mec="k")
+            ax.set_xlim(lo[0], hi[0])
+            ax.set_ylim(lo[1], hi[1])
             ax.set_aspect("equal")
             ax.set_title(f"{pol}, {angle:g} deg: {wins}/{traj['position'].shape[0]}", fontsize=9)
             ax.tick_params(labelsize=6)
-    fig.tight_layout()
+            if r == len(pols) - 1:
+                ax.set_xlabel(AXIS_LABELS[0], fontsize=8)
+            if c == 0:
+                ax.set_ylabel(AXIS_LABELS[1], fontsize=8)
+    _episode_legend(fig)
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return str(out)
@@ -225,14 +236,14 @@ def plot_abc(runs: dict, flow, out: Path) -> str:
     out.parent.mkdir(parents=True, exist_ok=True)
     b = flow.bounds
     pols = list(runs)
-    fig, axes = plt.subplots(len(pols), 2, figsize=(11, 2.9 * len(pols)), squeeze=False)
+    fig, axes = plt.subplots(len(pols), 2, figsize=(11, 2.9 * len(pols) + 0.4), squeeze=False, layout="constrained")
     first = next(iter(runs.values()))
     z = float(first["position"][0, 0, 2])
     X, Y, speed, _ = xy_slice(flow, z, float(first["t0"][0]), (b.lo[0], b.hi[0], b.lo[1], b.hi[1]))
     for r, pol in enumerate(pols):
         traj = runs[pol]
         ax, axz = axes[r]
-        ax.contourf(X, Y, speed, levels=20, cmap="Greys", alpha=0.6)
+        bg = ax.contourf(X, Y, speed, levels=20, cmap="Greys", alpha=0.6)
         wins = 0
         for i in range(traj["position"].shape[0]):
             p = _path(traj, i)
@@ -249,10 +260,23 @@ def plot_abc(runs: dict, flow, out: Path) -> str:
         ax.set_ylim(b.lo[1], b.hi[1])
         axz.set_xlim(b.lo[0], b.hi[0])
         axz.set_ylim(b.lo[2], b.hi[2])
-    fig.tight_layout()
+        for a, (u, v) in ((ax, (0, 1)), (axz, (0, 2))):
+            a.set_xlabel("xyz"[u], fontsize=8)  # the ABC flow's own length unit: no cylinder, no D
+            a.set_ylabel("xyz"[v], fontsize=8)
+            a.set_aspect("equal")
+    fig.colorbar(bg, ax=axes, label="flow speed |u|", ticks=MaxNLocator(4), shrink=0.8)
+    _episode_legend(fig)
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return str(out)
+
+
+def _episode_legend(fig) -> None:
+    """Below the panels: what line styles and markers mean when each colour is one episode."""
+    from matplotlib.lines import Line2D
+
+    colour = Line2D([], [], color="0.5", lw=0, label="colour: one episode")
+    fig.legend(handles=[colour, *style_legend_handles()], loc="outside lower center", ncol=5, fontsize=8, frameon=False)
 
 
 def make_movie(traj, flow, out: Path, title: str = "", frames: int = 60, fps: int = 10) -> str:
