@@ -18,7 +18,7 @@ from matplotlib.ticker import MaxNLocator
 from flownav.envs.kinematics import body_frame, to_body
 from flownav.envs.navigation import Status
 from flownav.flows.transforms import RotatedFlow
-from flownav.viz.colors import policy_color
+from flownav.viz.colors import MARKERS, policy_color
 from flownav.viz.fields import (
     AXIS_LABELS,
     VORTICITY_CMAP,
@@ -51,7 +51,6 @@ def _cylinder_3d(ax, flow, z0: float, z1: float) -> None:
 
 # Several policies' paths often overlap: earlier ones are drawn wider and below, and each policy
 # carries its own marker every few steps, so none hides another.
-MARKERS = ("o", "s", "^", "D", "v", "P", "X", "h")
 
 
 def _line_style(i: int, n: int, ok: bool) -> dict:
