@@ -152,7 +152,7 @@ def trajectories_figure(runs: dict, flow: FlowField, title: str = "", iso: float
             "zaxis": {"title": {"text": "z / D"}, "range": [b.lo[2], b.hi[2]]},
             "aspectmode": "manual",
             "aspectratio": dict(zip("xyz", (size / size.max()).tolist(), strict=True)),
-            "camera": {"eye": {"x": -0.9, "y": -1.5, "z": 0.9}},
+            "camera": {"eye": {"x": -0.75, "y": -1.25, "z": 0.65}, "center": {"x": 0.05, "y": 0, "z": -0.1}},
         },
         legend={"x": 0.82, "y": 0.95},
         margin={"l": 0, "r": 0, "t": 40, "b": 0},
