@@ -137,6 +137,14 @@ def test_unknown_units_and_missing_variables_are_named():
     assert "no vertical velocity (w / wo) found: w = 0" in flow.meta["notes"]
 
 
+def test_missing_values_are_counted_and_named():
+    ds = dataset()
+    ds["v"][0, 1, 1, 1] = np.nan
+    ds["v"][2, 0, 0, 0] = np.nan
+    with pytest.raises(GridFlowError, match=r"^variable 'v' holds 2 NaN or infinite values \(land or missing data\)"):
+        load_xarray_flow(ds)
+
+
 def test_time_modes_past_the_last_frame():
     ds = dataset()
     end = float(T[-1])
