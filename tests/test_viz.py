@@ -139,3 +139,18 @@ def test_render_script_writes_a_png_when_chromium_is_present(tmp_path):
 
     image = np.asarray(Image.open(png).convert("RGB"))
     assert image.shape[1] == 640 and image.std() > 10  # drawn, not a blank page
+
+
+def test_command_line_writes_the_page_of_each_checkpoint(tmp_path):
+    pytest.importorskip("plotly")
+    from flownav.viz.interactive import main
+
+    out = tmp_path / "uniform.html"
+    args = ["--checkpoint", "checkpoints/student.pt", "--checkpoint", "checkpoints/teacher.pt", "--out", str(out)]
+    main([*args, "flow=uniform", "env.time_limit=2"])
+    traces, layout, _ = html_traces(out)
+    names = sorted(t["name"] for t in traces if t["type"] == "scatter3d" and t["mode"] == "lines")
+    assert [n.split()[0] for n in names] == ["student", "teacher"]
+    assert all(n.endswith("(timeout)") for n in names)  # Region 2 is >= 3.7 D away in y: not in 2 time units
+    assert not any(t["name"] == "obstacle" for t in traces)  # the uniform flow has no cylinder
+    assert "student, teacher in uniform" in layout["title"]["text"]
