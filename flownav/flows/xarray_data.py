@@ -119,40 +119,7 @@ def load_xarray_flow(
     spacing_abs = [abs(s) for s in spacing]
     origin = [o if s > 0 else o + s * (ds.sizes[names[a]] - 1) for o, s, a in zip(origin, spacing, "xyz", strict=True)]
 
-    comps, frames = [], None
-    for comp in ("u", "v", "w"):
-        name = _find_variable(ds, comp, variables)
-        if name is None:
-            if comp == "w":
-                meta["notes"].append("no vertical velocity (w / wo) found: w = 0")
-                comps.append(None)
-                continue
-            raise GridFlowError(
-                f"no variable for {comp} in {sorted(ds.data_vars)}: pass variables={{'{comp}': '<name>'}} "
-                f"(defaults: {' / '.join(DEFAULT_VARIABLES[comp])})"
-            )
-        da = ds[name]
-        extra = [d for d in da.dims if d not in dims]
-        if extra or any(names[a] not in da.dims for a in "xyz"):
-            raise GridFlowError(
-                f"variable {name!r} has dimensions {da.dims}; it needs exactly {tuple(dims)} "
-                "(select or average the others away first, e.g. ds.isel(...))"
-            )
-        arr = da.transpose(*dims).values.astype(np.float64)
-        if names["t"] is None:
-            arr = arr[None]
-        bad = int((~np.isfinite(arr)).sum())
-        if bad:
-            raise GridFlowError(
-                f"variable {name!r} holds {bad} NaN or infinite values (land or missing data): "
-                "fill them first, e.g. ds.fillna(0.0)"
-            )
-        scale = 1.0 if dimensionless else _scale(da.attrs.get("units"), VELOCITY_UNITS, f"variable {name!r}", "m s-1")
-        comps.append(arr * scale)
-        frames = arr.shape
-        meta.setdefault("variables", {})[comp] = name
-    comps = [np.zeros(frames) if c is None else c for c in comps]
-    velocity = np.stack(comps, -1)
+    velocity = _velocity(ds, names, dims, variables, dimensionless, meta)
     for axis, f in enumerate(flip):
         if f:
             velocity = np.flip(velocity, axis + 1)
@@ -182,6 +149,42 @@ def load_xarray_flow(
         device=device,
         time_mode=time_mode,
     )
+
+
+def _velocity(ds, names: dict, dims: list, variables, dimensionless: bool, meta: dict) -> np.ndarray:
+    """[T, Nx, Ny, Nz, 3] in m/s (or as stored when dimensionless), each variable checked."""
+    comps, frames = [], None
+    for comp in ("u", "v", "w"):
+        name = _find_variable(ds, comp, variables)
+        if name is None:
+            if comp == "w":
+                meta["notes"].append("no vertical velocity (w / wo) found: w = 0")
+                comps.append(None)
+                continue
+            raise GridFlowError(
+                f"no variable for {comp} in {sorted(ds.data_vars)}: pass variables={{'{comp}': '<name>'}} "
+                f"(defaults: {' / '.join(DEFAULT_VARIABLES[comp])})"
+            )
+        da = ds[name]
+        if set(da.dims) != set(dims):
+            raise GridFlowError(
+                f"variable {name!r} has dimensions {da.dims}; it needs exactly {tuple(dims)} "
+                "(select or average the others away first, e.g. ds.isel(...))"
+            )
+        arr = da.transpose(*dims).values.astype(np.float64)
+        if names["t"] is None:
+            arr = arr[None]
+        bad = int((~np.isfinite(arr)).sum())
+        if bad:
+            raise GridFlowError(
+                f"variable {name!r} holds {bad} NaN or infinite values (land or missing data): "
+                "fill them first, e.g. ds.fillna(0.0)"
+            )
+        scale = 1.0 if dimensionless else _scale(_units(da), VELOCITY_UNITS, f"variable {name!r}", "m s-1")
+        comps.append(arr * scale)
+        frames = arr.shape
+        meta.setdefault("variables", {})[comp] = name
+    return np.stack([np.zeros(frames) if c is None else c for c in comps], -1)
 
 
 def _open(xr, source, engine):
