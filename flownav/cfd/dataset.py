@@ -206,6 +206,7 @@ def write_dataset(cfg: GenerateConfig, state: RunState, out: Path, command: str)
         obstacles=[Cylinder((0.0, 0.0), 0.5)],
         provenance=provenance,
         diagnostics=diag,
+        dtype=np.float16,  # the shipped wake's format: 48 MB (float32 would be 96)
     )
     h = state.history()
     np.savez_compressed(out / "history.npz", **h)

@@ -303,7 +303,7 @@ class Suite:
                         tv.make_movie(
                             runs[movie_pol],
                             flow,
-                            self.figures_dir / f"{name}_movie.gif",
+                            self.figures_dir / f"{name}_movie.mp4",
                             title=f"{movie_pol} in the cylinder wake",
                             frames=int(spec.get("movie_frames", 60)),
                         )

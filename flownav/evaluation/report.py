@@ -155,7 +155,8 @@ def _sweep_table(r: dict, xs, keyfn, xname: str, extra=None) -> list[str]:
 def _figures(r: dict, report_dir: Path) -> list[str]:
     out = []
     for f in r.get("figures", []) or []:
-        out.append(f"![{Path(f).stem}]({_rel(f, report_dir)})")
+        image = "!" if Path(f).suffix in (".png", ".gif", ".jpg", ".svg") else ""  # a movie is a plain link
+        out.append(f"{image}[{Path(f).stem}]({_rel(f, report_dir)})")
     return out + [""] if out else []
 
 

@@ -1,9 +1,11 @@
 """Flows given as velocity snapshots on a regular grid (CFD output), and their on-disk format.
 
-Interpolation is trilinear in space and linear in time; time loops with period
-``T * dt`` (frame ``T`` is frame ``0`` again), so a CFD window whose end matches its start
-gives a seamless, infinitely long flow. Spatial axes can be periodic (period ``N * spacing``,
-the spanwise axis of the cylinder wake); on the other axes positions are clamped to the grid.
+Interpolation is trilinear in space and linear in time. ``time_mode`` says what happens past the
+data: ``"looped"`` (the default) loops with period ``T * dt`` (frame ``T`` is frame ``0`` again), so a
+CFD window whose end matches its start gives a seamless, infinitely long flow; ``"clamped"`` holds the
+first and last frames before ``0`` and after ``(T - 1) * dt``; ``"error"`` raises there. Spatial
+axes can be periodic (period ``N * spacing``, the spanwise axis of the cylinder wake); on the other
+axes positions are clamped to the grid.
 Both are exact for fields linear in x, y, z and t (away from a periodic seam).
 
 On-disk format ``flownav-grid-v1``: a directory holding
@@ -37,6 +39,7 @@ from flownav.flows.base import Box, Cylinder, FlowField, obstacle_from_dict
 FORMAT = "flownav-grid-v1"
 VELOCITY_FILE = "velocity.npy"
 META_FILE = "meta.json"
+TIME_MODES = ("looped", "clamped", "error")
 DEFAULT_UNITS = {"length": "cylinder diameter D", "velocity": "inflow speed U", "time": "D / U"}
 
 
@@ -58,7 +61,11 @@ class GridFlow(FlowField):
         meta: dict | None = None,
         dtype: torch.dtype = torch.float32,
         device="cpu",
+        time_mode: str = "looped",
     ):
+        if time_mode not in TIME_MODES:
+            raise GridFlowError(f"time_mode is {time_mode!r}; choose one of {list(TIME_MODES)}")
+        self.time_mode = time_mode
         velocity = torch.as_tensor(np.asarray(velocity) if isinstance(velocity, np.ndarray) else velocity)
         check_velocity_array(velocity.shape, torch.isfinite(velocity).all().item())
         if len(origin) != 3 or len(spacing) != 3 or len(periodic) != 3:
@@ -70,7 +77,9 @@ class GridFlow(FlowField):
         self.spacing = tuple(float(s) for s in spacing)
         self.dt = float(dt)
         self.periodic = tuple(bool(p) for p in periodic)
-        self.period = self.shape[0] * self.dt
+        # Only a looped flow has a period (the env starts episodes at random phases of it).
+        self.period = self.shape[0] * self.dt if time_mode == "looped" else None
+        self.duration = (self.shape[0] - 1) * self.dt  # time of the last frame
         n = self.shape[1:]
         grid_hi = tuple(o + (k - 1) * s for o, k, s in zip(self.origin, n, self.spacing, strict=True))
         self.bounds = bounds if bounds is not None else Box(self.origin, grid_hi)
@@ -123,8 +132,20 @@ class GridFlow(FlowField):
             i0 = g.floor().clamp_(max=n - 2)
         return i0, g - i0
 
+    def _frame(self, t: Tensor) -> Tensor:
+        """Fractional frame index in [0, T) for ``time_mode`` (frame T is frame 0 again)."""
+        f = t / self.dt
+        if self.time_mode == "looped":
+            return torch.remainder(f, self.shape[0])
+        if self.time_mode == "error" and bool(((f < 0) | (f > self.shape[0] - 1)).any()):
+            raise GridFlowError(
+                f"flow time {float(t.min()):g}..{float(t.max()):g} is outside the data's "
+                f"[0, {self.duration:g}]: use time_mode='looped' or 'clamped', or give more frames"
+            )
+        return f.clamp(0, self.shape[0] - 1)
+
     def velocity(self, pos: Tensor, t: Tensor) -> Tensor:
-        f = torch.remainder(t.to(pos.dtype) / self.dt, self.shape[0])
+        f = self._frame(t.to(pos.dtype))
         f0 = f.floor().clamp_(0, self.shape[0] - 1)
         wt = f - f0
         x0, wx = self._axis(pos[:, 0], 0)
@@ -181,9 +202,11 @@ def save_grid_flow(
     provenance: dict | None = None,
     diagnostics: dict | None = None,
     units: dict | None = None,
-    dtype=np.float16,
+    dtype=np.float32,
 ) -> Path:
-    """Write a grid-flow dataset directory (atomically, file by file) and return its path."""
+    """Write a grid-flow dataset directory (atomically, file by file) and return its path.
+
+    ``dtype=np.float16`` halves the file at about 3 significant digits (the shipped wake uses it)."""
     velocity = np.asarray(velocity)
     check_velocity_array(velocity.shape, bool(np.isfinite(velocity).all()))
     path = Path(path)

@@ -19,3 +19,7 @@ POLICY_COLORS = {
 def policy_color(name: str, i: int = 0) -> str:
     name = str(name)
     return POLICY_COLORS.get(name) or POLICY_COLORS.get(name.split("_")[0], f"C{i}")
+
+
+# Markers that tell overlapping curves of several policies apart (the i-th policy of a figure).
+MARKERS = ("o", "s", "^", "D", "v", "P", "X", "h")

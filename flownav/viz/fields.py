@@ -31,3 +31,17 @@ def symmetric_levels(field, n: int = 31, pct: float = 99.0):
 
     lim = float(np.nanpercentile(np.abs(field), pct)) or 1.0
     return np.clip(field, -lim, lim), np.linspace(-lim, lim, n)
+
+
+# One look for every figure of the flow: the colour map and labels of z-vorticity, and lengths in D.
+VORTICITY_CMAP = "RdBu_r"
+VORTICITY_LABEL = r"$\omega_z D / U$"
+AXIS_LABELS = ("x / D", "y / D", "z / D")
+
+
+def draw_obstacles(ax, flow) -> None:
+    """The flow's cylinders as grey discs on an x-y axis."""
+    import matplotlib.pyplot as plt
+
+    for ob in getattr(flow, "obstacles", ()):
+        ax.add_patch(plt.Circle(ob.center, ob.radius, color="0.3", zorder=2))

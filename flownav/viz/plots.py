@@ -10,7 +10,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from flownav.viz.colors import policy_color
+from flownav.viz.colors import MARKERS, policy_color
 
 
 def plot_sweep(results: dict, xs, out: Path, xlabel: str, title: str = "", keyfn=lambda x: f"{x:g}") -> str:
@@ -23,7 +23,9 @@ def plot_sweep(results: dict, xs, out: Path, xlabel: str, title: str = "", keyfn
         lo = np.array([100 * per[keyfn(x)]["success_ci95"][0] for x in xs])
         hi = np.array([100 * per[keyfn(x)]["success_ci95"][1] for x in xs])
         err = [np.clip(rates - lo, 0, None), np.clip(hi - rates, 0, None)]
-        ax.errorbar(xs, rates, yerr=err, marker="o", capsize=3, label=name, color=policy_color(name, i))
+        ax.errorbar(
+            xs, rates, yerr=err, marker=MARKERS[i % len(MARKERS)], capsize=3, label=name, color=policy_color(name, i)
+        )
     ax.set_xlabel(xlabel)
     ax.set_ylabel("success rate (%)")
     ax.set_ylim(-2, 102)

@@ -13,12 +13,20 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 import torch
+from matplotlib.ticker import MaxNLocator
 
 from flownav.envs.kinematics import body_frame, to_body
 from flownav.envs.navigation import Status
 from flownav.flows.transforms import RotatedFlow
-from flownav.viz.colors import policy_color
-from flownav.viz.fields import symmetric_levels, xy_slice
+from flownav.viz.colors import MARKERS, policy_color
+from flownav.viz.fields import (
+    AXIS_LABELS,
+    VORTICITY_CMAP,
+    VORTICITY_LABEL,
+    draw_obstacles,
+    symmetric_levels,
+    xy_slice,
+)
 
 
 def _path(traj, i: int = 0) -> np.ndarray:
@@ -41,42 +49,80 @@ def _cylinder_3d(ax, flow, z0: float, z1: float) -> None:
         )
 
 
+# Several policies' paths often overlap: earlier ones are drawn wider and below, and each policy
+# carries its own marker every few steps, so none hides another.
+
+
+def _line_style(i: int, n: int, ok: bool) -> dict:
+    return {
+        "ls": "-" if ok else "--",
+        "lw": 1.2 + 1.0 * (n - 1 - i),
+        "zorder": 3 + i,
+        "marker": MARKERS[i % len(MARKERS)],
+        "markevery": 12,
+        "ms": 4,
+    }
+
+
+def style_legend_handles() -> list:
+    """Legend entries for what line styles and markers mean (the policies have their own entries)."""
+    from matplotlib.lines import Line2D
+
+    return [
+        Line2D([], [], color="k", ls="-", label="reached the target"),
+        Line2D([], [], color="k", ls="--", label="failed"),
+        Line2D([], [], color="k", marker="o", ls="", label="start"),
+        Line2D([], [], color="gold", marker="*", mec="k", ms=12, ls="", label="target"),
+    ]
+
+
 def plot_trajectories_3d(runs: dict, flow, out: Path, title: str = "") -> str:
-    """One episode per policy (same start and target), in 3D, over the z-vorticity of the start plane."""
+    """One episode per policy (same start and target): in 3D, and in x-y over the z-vorticity of the
+    start plane at the start time (colorbar), in two panels of equal size."""
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     b = flow.bounds
-    fig = plt.figure(figsize=(11, 4.8))
-    ax = fig.add_subplot(1, 2, 1, projection="3d")
-    ax2 = fig.add_subplot(1, 2, 2)
+    fig = plt.figure(figsize=(13, 5.2))
+    grid = fig.add_gridspec(1, 3, width_ratios=(1, 1, 0.04), wspace=0.25)
+    ax = fig.add_subplot(grid[0], projection="3d")
+    ax2 = fig.add_subplot(grid[1])
+    cax = fig.add_subplot(grid[2])
     first = next(iter(runs.values()))
     start = first["position"][0, 0].numpy()
     target = first["target"][0].numpy()
     X, Y, _, om = xy_slice(flow, float(start[2]), float(first["t0"][0]), (b.lo[0], b.hi[0], b.lo[1], b.hi[1]))
     om, levels = symmetric_levels(om)
-    ax2.contourf(X, Y, om, levels=levels, cmap="RdBu_r")
-    for ob in getattr(flow, "obstacles", ()):
-        ax2.add_patch(plt.Circle(ob.center, ob.radius, color="0.3"))
+    bg = ax2.contourf(X, Y, om, levels=levels, cmap=VORTICITY_CMAP)
+    fig.colorbar(bg, cax=cax, label=VORTICITY_LABEL, ticks=MaxNLocator(5, symmetric=True))
+    draw_obstacles(ax2, flow)
     _cylinder_3d(ax, flow, b.lo[2], b.hi[2])
+    handles = []
     for i, (name, traj) in enumerate(runs.items()):
         p = _path(traj)
         status = Status(int(traj["status"][0])).name.lower()
-        ax.plot(p[:, 0], p[:, 1], p[:, 2], color=policy_color(name, i), label=f"{name} ({status})")
-        ax2.plot(p[:, 0], p[:, 1], color=policy_color(name, i), lw=1.5)
+        style = _line_style(i, len(runs), status == "success")
+        color = policy_color(name, i)
+        (h,) = ax.plot(p[:, 0], p[:, 1], p[:, 2], color=color, label=f"{name} ({status})", **style)
+        ax2.plot(p[:, 0], p[:, 1], color=color, mec="k", mew=0.3, **style)
+        handles.append(h)
     for a in (ax, ax2):
-        a.plot(*([start[0]], [start[1]]) + (([start[2]],) if a is ax else ()), "o", color="k")
-        a.plot(*([target[0]], [target[1]]) + (([target[2]],) if a is ax else ()), "*", color="gold", ms=14, mec="k")
+        z = (([start[2]],), ([target[2]],)) if a is ax else ((), ())
+        a.plot([start[0]], [start[1]], *z[0], "o", color="k", zorder=10)
+        a.plot([target[0]], [target[1]], *z[1], "*", color="gold", ms=14, mec="k", zorder=10)
     ax.set_xlim(b.lo[0], b.hi[0])
     ax.set_ylim(b.lo[1], b.hi[1])
     ax.set_zlim(b.lo[2], b.hi[2])
-    ax.set_xlabel("x")
-    ax.set_ylabel("y")
-    ax.set_zlabel("z")
-    ax.legend(fontsize=7, loc="upper left")
+    ax.set_box_aspect(b.size, zoom=1.1)
+    ax.set_xlabel(AXIS_LABELS[0])
+    ax.set_ylabel(AXIS_LABELS[1])
+    ax.set_zlabel(AXIS_LABELS[2])
+    ax2.set_xlabel(AXIS_LABELS[0])
+    ax2.set_ylabel(AXIS_LABELS[1])
     ax2.set_aspect("equal")
-    ax2.set_title(f"x-y projection over z-vorticity at z = {start[2]:.1f}, t = 0", fontsize=9)
+    ax2.set_title(f"x-y, over the z-vorticity at z = {start[2]:.1f} D, t = 0", fontsize=9)
+    fig.legend(handles=handles + style_legend_handles(), loc="lower center", ncol=4, fontsize=8, frameon=False)
     fig.suptitle(title)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.0, right=0.93, top=0.9, bottom=0.17)
     fig.savefig(out, dpi=120)
     plt.close(fig)
     return str(out)
@@ -109,9 +155,9 @@ def plot_velocity_traces(runs: dict, out: Path) -> str:
             axes[r][j].axhline(0, color="k", lw=0.5)
             axes[r][j].grid(alpha=0.3)
             axes[r][j].legend(fontsize=7)
-        axes[1][j].set_xlabel("t")
-    axes[0][0].set_ylabel("inertial (geo) velocity")
-    axes[1][0].set_ylabel("body-frame (ego) velocity")
+        axes[1][j].set_xlabel("t (D / U)")
+    axes[0][0].set_ylabel("inertial (geo) velocity / U")
+    axes[1][0].set_ylabel("body-frame (ego) velocity / U")
     fig.tight_layout()
     fig.savefig(out, dpi=120)
     plt.close(fig)
@@ -143,8 +189,13 @@ def plot_misaligned(runs: dict, flow, out: Path) -> str:
     out.parent.mkdir(parents=True, exist_ok=True)
     pols = list(dict.fromkeys(k[0] for k in runs))
     angles = list(dict.fromkeys(k[1] for k in runs))
-    fig, axes = plt.subplots(len(pols), len(angles), figsize=(3.2 * len(angles), 3.0 * len(pols)), squeeze=False)
+    fig, axes = plt.subplots(
+        len(pols), len(angles), figsize=(3.2 * len(angles), 3.0 * len(pols) + 0.4), squeeze=False, layout="constrained"
+    )
     box = _rotated_box(flow)
+    # One extent for every panel (the union of the rotated domains): panels of equal size and scale.
+    corners = torch.cat([rotate_z(box, math.radians(a), (0.0, 0.0)) for a in angles]).numpy()
+    lo, hi = corners.min(0) - 0.5, corners.max(0) + 0.5
     for r, pol in enumerate(pols):
         for c, angle in enumerate(angles):
             ax = axes[r][c]
@@ -163,10 +214,16 @@ def plot_misaligned(runs: dict, flow, out: Path) -> str:
                 ax.plot(p[0, 0], p[0, 1], "o", color=f"C{i}", ms=3)
                 tg = traj["target"][i].numpy()
                 ax.plot(tg[0], tg[1], "*", color=f"C{i}", ms=9, mec="k")
+            ax.set_xlim(lo[0], hi[0])
+            ax.set_ylim(lo[1], hi[1])
             ax.set_aspect("equal")
             ax.set_title(f"{pol}, {angle:g} deg: {wins}/{traj['position'].shape[0]}", fontsize=9)
             ax.tick_params(labelsize=6)
-    fig.tight_layout()
+            if r == len(pols) - 1:
+                ax.set_xlabel(AXIS_LABELS[0], fontsize=8)
+            if c == 0:
+                ax.set_ylabel(AXIS_LABELS[1], fontsize=8)
+    _episode_legend(fig)
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return str(out)
@@ -178,14 +235,14 @@ def plot_abc(runs: dict, flow, out: Path) -> str:
     out.parent.mkdir(parents=True, exist_ok=True)
     b = flow.bounds
     pols = list(runs)
-    fig, axes = plt.subplots(len(pols), 2, figsize=(11, 2.9 * len(pols)), squeeze=False)
+    fig, axes = plt.subplots(len(pols), 2, figsize=(11, 2.9 * len(pols) + 0.4), squeeze=False, layout="constrained")
     first = next(iter(runs.values()))
     z = float(first["position"][0, 0, 2])
     X, Y, speed, _ = xy_slice(flow, z, float(first["t0"][0]), (b.lo[0], b.hi[0], b.lo[1], b.hi[1]))
     for r, pol in enumerate(pols):
         traj = runs[pol]
         ax, axz = axes[r]
-        ax.contourf(X, Y, speed, levels=20, cmap="Greys", alpha=0.6)
+        bg = ax.contourf(X, Y, speed, levels=20, cmap="Greys", alpha=0.6)
         wins = 0
         for i in range(traj["position"].shape[0]):
             p = _path(traj, i)
@@ -202,15 +259,29 @@ def plot_abc(runs: dict, flow, out: Path) -> str:
         ax.set_ylim(b.lo[1], b.hi[1])
         axz.set_xlim(b.lo[0], b.hi[0])
         axz.set_ylim(b.lo[2], b.hi[2])
-    fig.tight_layout()
+        for a, (u, v) in ((ax, (0, 1)), (axz, (0, 2))):
+            a.set_xlabel("xyz"[u], fontsize=8)  # the ABC flow's own length unit: no cylinder, no D
+            a.set_ylabel("xyz"[v], fontsize=8)
+            a.set_aspect("equal")
+    fig.colorbar(bg, ax=axes, label="flow speed |u|", ticks=MaxNLocator(4), shrink=0.8)
+    _episode_legend(fig)
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return str(out)
 
 
+def _episode_legend(fig) -> None:
+    """Below the panels: what line styles and markers mean when each colour is one episode."""
+    from matplotlib.lines import Line2D
+
+    colour = Line2D([], [], color="0.5", lw=0, label="colour: one episode")
+    fig.legend(handles=[colour, *style_legend_handles()], loc="outside lower center", ncol=5, fontsize=8, frameon=False)
+
+
 def make_movie(traj, flow, out: Path, title: str = "", frames: int = 60, fps: int = 10) -> str:
-    """A gif of one episode: x-y position over the z-vorticity at the swimmer's height and flow time."""
-    from matplotlib.animation import FuncAnimation, PillowWriter
+    """An MP4 (H.264, through imageio-ffmpeg) of one episode: the x-y path over the z-vorticity at the
+    swimmer's height and flow time, one colour scale for the whole movie (its colorbar alongside)."""
+    import imageio.v2 as imageio  # the [viz] extra
 
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -220,27 +291,29 @@ def make_movie(traj, flow, out: Path, title: str = "", frames: int = 60, fps: in
     t0 = float(traj["t0"][0])
     idx = np.unique(np.linspace(0, len(p) - 1, min(frames, len(p))).round().astype(int))
     extent = (b.lo[0], b.hi[0], b.lo[1], b.hi[1])
-    fig, ax = plt.subplots(figsize=(7, 4.4))
     tg = traj["target"][0].numpy()
-
-    def draw(j):
-        ax.clear()
-        i = idx[j]
-        X, Y, _, om = xy_slice(flow, float(p[i, 2]), t0 + float(t[i]), extent, n=(120, 72))
-        om, levels = symmetric_levels(om, 21)
-        ax.contourf(X, Y, om, levels=levels, cmap="RdBu_r")
-        for ob in getattr(flow, "obstacles", ()):
-            ax.add_patch(plt.Circle(ob.center, ob.radius, color="0.3"))
-        ax.plot(p[: i + 1, 0], p[: i + 1, 1], color="k", lw=1.5)
-        ax.plot(p[i, 0], p[i, 1], "o", color="tab:orange", ms=7, mec="k")
-        ax.plot(tg[0], tg[1], "*", color="gold", ms=14, mec="k")
-        ax.set_xlim(extent[0], extent[1])
-        ax.set_ylim(extent[2], extent[3])
-        ax.set_aspect("equal")
-        ax.set_title(f"{title}  t = {t[i]:.1f}, z = {p[i, 2]:.2f}", fontsize=9)
-
-    anim = FuncAnimation(fig, draw, frames=len(idx))
-    anim.save(out, writer=PillowWriter(fps=fps))
+    _, levels = symmetric_levels(xy_slice(flow, float(p[0, 2]), t0, extent, n=(120, 72))[3], 21)
+    norm = plt.Normalize(levels[0], levels[-1])
+    # 800 x 480 pixels: H.264 wants sides divisible by 16.
+    fig, ax = plt.subplots(figsize=(8, 4.8), dpi=100, layout="constrained")
+    fig.colorbar(plt.cm.ScalarMappable(norm, VORTICITY_CMAP), ax=ax, label=VORTICITY_LABEL, shrink=0.8)
+    with imageio.get_writer(out, fps=fps, codec="libx264", quality=8, macro_block_size=16) as writer:
+        for i in idx:
+            ax.clear()
+            X, Y, _, om = xy_slice(flow, float(p[i, 2]), t0 + float(t[i]), extent, n=(120, 72))
+            ax.contourf(X, Y, np.clip(om, levels[0], levels[-1]), levels=levels, cmap=VORTICITY_CMAP, norm=norm)
+            draw_obstacles(ax, flow)
+            ax.plot(p[: i + 1, 0], p[: i + 1, 1], color="k", lw=1.5)
+            ax.plot(p[i, 0], p[i, 1], "o", color="tab:orange", ms=7, mec="k")
+            ax.plot(tg[0], tg[1], "*", color="gold", ms=14, mec="k")
+            ax.set_xlim(extent[0], extent[1])
+            ax.set_ylim(extent[2], extent[3])
+            ax.set_aspect("equal")
+            ax.set_xlabel("x / D")
+            ax.set_ylabel("y / D")
+            ax.set_title(f"{title}  t = {t[i]:.1f} D/U, z = {p[i, 2]:.2f} D", fontsize=9)
+            fig.canvas.draw()
+            writer.append_data(np.asarray(fig.canvas.buffer_rgba())[..., :3])
     plt.close(fig)
     return str(out)
 
