@@ -96,3 +96,27 @@ class DeterministicPolicy(nn.Module):
 
     def forward(self, obs: Tensor) -> Tensor:
         return self.squash(self.net(self.normalizer(obs))[..., : self.action_dim])
+
+    def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
+        """Refuse, in one line naming the sizes, the weights of a network of another shape."""
+        weights = [state_dict[k] for k in sorted(state_dict, key=_layer_index) if _layer_index(k) >= 0]
+        if weights:
+            saved = {"obs_dim": weights[0].shape[1], "hidden": [w.shape[0] for w in weights[:-1]]}
+            saved["n_outputs"] = weights[-1].shape[0]
+            mine = {k: self.config[k] for k in saved}
+            if saved != mine:
+                from flownav.errors import CheckpointError
+
+                raise CheckpointError(
+                    f"the checkpoint's policy was trained with hidden={saved['hidden']} ({saved['obs_dim']} inputs, "
+                    f"{saved['n_outputs']} outputs) but this network has hidden={mine['hidden']} ({mine['obs_dim']} "
+                    f"inputs, {mine['n_outputs']} outputs): set the run's hidden sizes to {saved['hidden']} "
+                    "(algo.hidden for DAgger, algo.actor.hidden for PPO) or use a checkpoint of this size"
+                )
+        return super().load_state_dict(state_dict, strict=strict, assign=assign)
+
+
+def _layer_index(key: str) -> int:
+    """Index of an MLP layer's weight (``net.<i>.weight``) in a state dict, -1 for other entries."""
+    parts = key.split(".")
+    return int(parts[1]) if len(parts) == 3 and parts[0] == "net" and parts[2] == "weight" else -1

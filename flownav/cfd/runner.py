@@ -15,6 +15,7 @@ from tqdm import tqdm
 
 from flownav.atomic import atomic_write
 from flownav.cfd.solver import CylinderLBM
+from flownav.checkpoint import safe_torch_load
 
 
 @dataclass
@@ -47,8 +48,19 @@ def save_checkpoint(path: Path, sim: CylinderLBM, run: RunState) -> None:
     atomic_write(path, lambda f: torch.save({"sim": sim.state_dict(), "run": run.__dict__}, f))
 
 
+# The numpy types a run state holds (its recorded frames); nothing else may be unpickled.
+NUMPY_ARRAY_GLOBALS = (
+    np.ndarray,
+    np.dtype,
+    np._core.multiarray._reconstruct,
+    np.dtypes.Float16DType,
+    np.dtypes.Float32DType,
+    np.dtypes.Float64DType,
+)
+
+
 def load_checkpoint(path: Path, sim: CylinderLBM) -> RunState:
-    state = torch.load(path, weights_only=False)
+    state = safe_torch_load(path, NUMPY_ARRAY_GLOBALS)
     sim.load_state_dict(state["sim"])
     run = RunState()
     run.__dict__.update(state["run"])
