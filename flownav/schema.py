@@ -21,17 +21,20 @@ from dataclasses import dataclass
 
 from flownav.errors import ConfigError
 
-INT, FLOAT, BOOL, STR, INTS, FLOATS, STRS, BOX, DEVICE = (
+INT, FLOAT, BOOL, STR, INTS, FLOATS, BOOLS, STRS, DICTS, BOX, DEVICE = (
     "int",
     "float",
     "bool",
     "str",
     "ints",
     "floats",
+    "bools",
     "strs",
+    "dicts",
     "box",
     "device",
 )
+LISTS = (INTS, FLOATS, BOOLS, STRS, DICTS)
 BOX_SHAPE = "[[x0, y0, z0], [x1, y1, z1]] with x1 > x0 etc."
 
 
@@ -67,8 +70,10 @@ class Key:
             BOOL: "true or false",
             STR: "a string",
             INTS: "a non-empty list of integers",
-            FLOATS: f"a list of {self.size} finite numbers" if self.size else "a list of finite numbers",
+            FLOATS: f"a list of {self.size or ''} finite numbers",
+            BOOLS: f"a list of {self.size or ''} true/false values",
             STRS: "a list of strings",
+            DICTS: "a list of objects",
             BOX: BOX_SHAPE,
             DEVICE: "a torch device (cpu, cuda, cuda:0)",
         }[self.kind]
@@ -138,7 +143,11 @@ def check_value(path: str, key: Key, v, error=ConfigError) -> None:
         if v not in key.choices:
             raise error(f"{path} is {v!r}; choose one of {sorted(key.choices)}")
         return
-    bad = f"{path} must be " + ", ".join(t for t in (key.range_text(), key.type_text()) if t) + f"; got {v!r}"
+    if key.kind in LISTS:
+        what = key.type_text() + (f", each {key.range_text()}" if key.range_text() else "")
+    else:
+        what = ", ".join(t for t in (key.range_text(), key.type_text()) if t)
+    bad = f"{path} must be {' '.join(what.split())}; got {v!r}"
     if key.kind == INT:
         ok = _is_int(v) and _in_range(key, v)
     elif key.kind == FLOAT:
@@ -150,9 +159,14 @@ def check_value(path: str, key: Key, v, error=ConfigError) -> None:
     elif key.kind == INTS:
         ok = _is_list(v) and len(v) > 0 and all(_is_int(h) and _in_range(key, h) for h in v)
     elif key.kind == FLOATS:
-        ok = _is_list(v) and (key.size is None or len(v) == key.size) and all(_is_float(x) for x in v)
+        ok = _is_list(v) and (key.size is None or len(v) == key.size)
+        ok = ok and all(_is_float(x) and _in_range(key, x) for x in v)
+    elif key.kind == BOOLS:
+        ok = _is_list(v) and (key.size is None or len(v) == key.size) and all(isinstance(x, bool) for x in v)
     elif key.kind == STRS:
         ok = _is_list(v) and all(isinstance(x, str) for x in v)
+    elif key.kind == DICTS:
+        ok = _is_list(v) and all(isinstance(x, Mapping) for x in v)
     elif key.kind == BOX:
         ok = (
             _is_list(v)
@@ -171,10 +185,13 @@ def check_value(path: str, key: Key, v, error=ConfigError) -> None:
         raise error(bad)
 
 
-def check_group(cfg: Mapping, schema: Mapping, prefix: str, closed: bool = False, error=ConfigError) -> None:
-    """Check the keys of ``cfg`` that ``schema`` declares (nested dicts are sub-groups).
+def check_group(
+    cfg: Mapping, schema: Mapping, prefix: str, closed: bool = False, error=ConfigError, join: str = "."
+) -> None:
+    """Check the keys of ``cfg`` that ``schema`` declares (nested dicts are sub-groups, always closed).
 
     ``closed``: refuse keys the schema does not declare (groups Hydra's struct mode does not guard).
+    ``join``: between ``prefix`` and a key (``env.dt``; ``meta.json: dt``).
     """
     if not isinstance(cfg, Mapping):
         raise error(f"{prefix} must be a group of keys ({sorted(schema)}); got {cfg!r}")
@@ -183,7 +200,7 @@ def check_group(cfg: Mapping, schema: Mapping, prefix: str, closed: bool = False
         if unknown:
             raise error(f"{prefix} has an unknown key {unknown[0]!r}; keys: {list(schema)}")
     for name, key in schema.items():
-        path = f"{prefix}.{name}" if prefix else name
+        path = f"{prefix}{join}{name}" if prefix else name
         if name not in cfg:
             if isinstance(key, Key) and key.required:
                 raise error(f"{path} is missing; set it to {key.type_text()}")

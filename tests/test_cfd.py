@@ -189,7 +189,7 @@ def test_generate_writes_a_loadable_periodic_dataset(tmp_path):
     from flownav.flows.grid import load_grid_flow
 
     sim = SimConfig(re=100, cells_per_d=4, u_lattice=0.15, x_range=(-5, 26), y_half=7.5, span=2.0)
-    cfg = GenerateConfig(sim=sim, warmup=12.0, record=14.0, frame_dt=0.5, out_spacing=0.5, min_periods=1)
+    cfg = GenerateConfig(sim=sim, warmup=12.0, record=14.0, frame_dt=0.45, out_spacing=0.5, min_periods=1)
     _, state = simulate(cfg, tmp_path / "run")
     diag = write_dataset(cfg, state, tmp_path / "data", command="test")
     flow = load_grid_flow(tmp_path / "data")

@@ -176,6 +176,7 @@ def tiny_world(tmp_path_factory):
     v = 0.2 * np.sin(0.5 * x - t) + 0 * y
     w = 0.05 * np.cos(x + t) + 0 * y
     vel = np.stack(np.broadcast_arrays(u, v, w), -1) * np.ones((1, 1, 1, nz, 1))
+    vel[:, x[0, :, 0, 0, None] ** 2 + y[0, 0, :, 0] ** 2 < 0.25] = 0.0  # the declared cylinder is solid
     data = save_grid_flow(
         root / "wake",
         vel.astype(np.float32),
