@@ -42,13 +42,12 @@ class GenerateConfig:
     min_periods: int = 3
 
     def check(self) -> None:
-        sizes = {"warmup": self.warmup, "record": self.record, "frame_dt": self.frame_dt}
-        sizes["out_spacing"] = self.out_spacing
-        for name, value in sizes.items():
+        sizes = {"warmup": (self.warmup, "D/U"), "record": (self.record, "D/U"), "frame_dt": (self.frame_dt, "D/U")}
+        sizes["out_spacing"] = (self.out_spacing, "D")
+        for name, (value, unit) in sizes.items():
             if not (value > 0 and math.isfinite(value)):
-                raise ConfigError(
-                    f"{name} (--{name.replace('_', '-')}) must be a positive number of D/U or D, got {value}"
-                )
+                flag = "--" + name.replace("_", "-")
+                raise ConfigError(f"{name} ({flag}) must be a positive number of {unit}, got {value}")
         if self.min_periods < 1:
             raise ConfigError(f"min_periods must be >= 1, got {self.min_periods}")
         for name in ("warmup", "frame_dt"):  # frames are taken at whole lattice steps; anything else drifts
