@@ -55,7 +55,7 @@ class GenerateConfig:
             if abs(steps - round(steps)) > 1e-6 * max(1.0, steps) or round(steps) < 1:
                 good = max(1, round(steps)) * self.sim.dt
                 raise ConfigError(
-                    f"{name} (--{name.replace('_', '-')}) = {getattr(self, name)} D/U is {steps:.4g} lattice steps of "
+                    f"{name} (--{name.replace('_', '-')}) = {getattr(self, name)} D/U is {steps:.6g} lattice steps of "
                     f"{self.sim.dt:.6g} D/U; use a whole number of steps, e.g. {good:.6g}"
                 )
         r = self.out_spacing / self.sim.dx
