@@ -305,3 +305,20 @@ def test_debug_switch_shows_the_traceback(tmp_path):
         ["-m", "flownav.cfd", "generate", "--warmup", "-1", "--run-dir", str(tmp_path)], FLOWNAV_DEBUG="1"
     )
     assert out.returncode != 0 and "Traceback" in out.stderr and "ConfigError: warmup (--warmup)" in out.stderr
+
+
+def test_every_shipped_checkpoint_loads_without_running_code():
+    from flownav.checkpoint import load_policy
+
+    shipped = sorted((ROOT / "checkpoints").glob("*.pt"))
+    assert len(shipped) >= 10
+    for path in shipped:
+        policy, payload = load_policy(path)  # weights_only=True: tensors and plain data only
+        assert payload["obs"] and policy.config["obs_dim"] == observation_size(payload["obs"])
+
+
+def test_no_loader_in_the_package_allows_code():
+    sources = [*(ROOT / "flownav").rglob("*.py"), ROOT / "train.py", ROOT / "evaluate.py"]
+    calls = [p for p in sources if "torch.load(" in p.read_text()]
+    assert [p.relative_to(ROOT).as_posix() for p in calls] == ["flownav/checkpoint.py"]  # safe_torch_load only
+    assert "weights_only=False" not in (ROOT / "flownav" / "checkpoint.py").read_text()
