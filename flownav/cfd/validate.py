@@ -142,7 +142,7 @@ def validate(dataset: Path, out: Path, run_dir: Path, cells_per_d=None, device="
     try:
         result["case_3d_re300"] = validate_3d(dataset)
     except (OSError, ValueError) as e:
-        result["case_3d_re300"] = {"error": f"{e}; run `python -m flownav.cfd generate` first"}
+        result["case_3d_re300"] = {"error": f"{e}; run `python -m flownav.cfd generate --out {dataset}` first"}
     c2, c3 = result["case_2d_re100"], result["case_3d_re300"]
     checks = {"2d_St": c2["St"]["passed"], "2d_Cd": c2["Cd"]["passed"]}
     if "error" not in c3:

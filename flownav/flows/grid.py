@@ -264,7 +264,7 @@ def check_obstacles_are_solid(flow: GridFlow, where) -> None:
 def load_grid_flow(path: str | os.PathLike, device="cpu", dtype=torch.float32, verify: bool = True) -> GridFlow:
     """Load and validate a ``flownav-grid-v1`` dataset directory."""
     path = Path(path)
-    regen = "regenerate it with `python -m flownav.cfd generate` or point flow.path at a valid dataset"
+    regen = "regenerate it with `python -m flownav.cfd generate --out <dir>` or point flow.path at a valid dataset"
     if not path.is_dir():
         raise GridFlowError(f"no grid-flow dataset at {path}: {regen}")
     meta_path, vel_path = path / META_FILE, path / VELOCITY_FILE
