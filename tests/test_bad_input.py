@@ -322,3 +322,19 @@ def test_no_loader_in_the_package_allows_code():
     calls = [p for p in sources if "torch.load(" in p.read_text()]
     assert [p.relative_to(ROOT).as_posix() for p in calls] == ["flownav/checkpoint.py"]  # safe_torch_load only
     assert "weights_only=False" not in (ROOT / "flownav" / "checkpoint.py").read_text()
+
+
+def test_every_shipped_config_passes_the_schema():
+    from flownav import schema
+
+    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
+        for experiment in sorted(p.stem for p in (ROOT / "conf" / "experiment").glob("*.yaml")):
+            schema.check_train(compose("config", overrides=[f"+experiment={experiment}"]))
+        search = f"hydra.searchpath=[file://{ROOT / 'conf' / 'evaluate'}]"
+        for suite in sorted(p.stem for p in (ROOT / "conf" / "evaluate" / "experiment").glob("*.yaml")):
+            cfg = compose("evaluate", overrides=[search, f"+experiment={suite}"])
+            schema.check_evaluate(cfg)
+            for spec in cfg.suite.values():
+                for key, check in (("flow", schema.check_flow), ("task", schema.check_task)):
+                    if key in spec:
+                        check(spec[key])
