@@ -47,6 +47,11 @@ def files(tmp_path_factory) -> dict:
     root = tmp_path_factory.mktemp("bad")
     small = DeterministicPolicy(observation_size("geo_sincos"), ACTION_LOW, action_high(), hidden=(16,), n_outputs=6)
     f = {"marker": root / "marker", "small": save_policy_checkpoint(root / "small.pt", small, "geo_sincos", "teacher")}
+    from flownav.algorithms.ppo import CriticNet
+
+    actor = DeterministicPolicy(observation_size("geo_sincos"), ACTION_LOW, action_high(), hidden=(64, 64), n_outputs=6)
+    critic = {"critic": CriticNet(observation_size("geo_sincos"), [32], "tanh").state_dict()}
+    f["critic"] = save_policy_checkpoint(root / "critic.pt", actor, "geo_sincos", "teacher", train_state=critic)
     payload = torch.load(f["small"], weights_only=True)
     del payload["policy"]
     torch.save(payload, root / "nopolicy.pt")
@@ -200,7 +205,12 @@ CASES = [
     (
         "hidden_mismatch",
         train_case("algo.init_from={small}", "algo.total_frames=1"),
-        "the checkpoint's policy was trained with hidden=[16] (9 inputs, 6 outputs) but this network has hidden=[64, 64] (9 inputs, 6 outputs): set the run's hidden sizes to [16] (algo.hidden for DAgger, algo.actor.hidden for PPO) or use a checkpoint of this size",
+        "the checkpoint's network was trained with hidden=[16] (9 inputs, 6 outputs) but this one has hidden=[64, 64] (9 inputs, 6 outputs): set algo.actor.hidden=[16] (PPO) or algo.hidden=[16] (DAgger) or use a checkpoint of this size",
+    ),
+    (
+        "critic_mismatch",
+        train_case("algo.init_from={critic}", "algo.total_frames=1"),
+        "the checkpoint's network was trained with hidden=[32] (9 inputs, 1 outputs) but this one has hidden=[64, 64] (9 inputs, 1 outputs): set algo.critic.hidden=[32] or use a checkpoint of this size",
     ),
     (
         "missing_policy",

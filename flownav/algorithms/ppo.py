@@ -31,7 +31,7 @@ from torchrl.modules import ProbabilisticActor, TanhNormal, ValueOperator
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
-from flownav.agents.networks import DeterministicPolicy, ObsNormalizer, mlp
+from flownav.agents.networks import DeterministicPolicy, ObsNormalizer, check_mlp_size, mlp
 from flownav.atomic import atomic_copy
 from flownav.builders import ConfigError, build_env, build_flow, build_task
 from flownav.checkpoint import load_checkpoint, load_resume_checkpoint, save_policy_checkpoint
@@ -67,6 +67,12 @@ class CriticNet(nn.Module):
 
     def forward(self, obs):
         return self.net(self.normalizer(obs))
+
+    def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
+        config = {"obs_dim": self.normalizer.mean.shape[0], "n_outputs": 1}
+        config["hidden"] = [m.out_features for m in self.net if isinstance(m, nn.Linear)][:-1]
+        check_mlp_size(state_dict, config, "algo.critic.hidden={hidden}")
+        return super().load_state_dict(state_dict, strict=strict, assign=assign)
 
 
 def _init_output_layer(seq: nn.Sequential, gain: float):
