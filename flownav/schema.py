@@ -53,14 +53,14 @@ class Key:
     required: bool = False
 
     def range_text(self) -> str:
-        lo = (f"[{self.ge:g}" if self.ge is not None else f"({self.gt:g}") if (self.ge, self.gt) != (None, None) else ""
-        hi = (f"{self.le:g}]" if self.le is not None else f"{self.lt:g})") if (self.le, self.lt) != (None, None) else ""
+        lo = ("[", self.ge) if self.ge is not None else ("(", self.gt) if self.gt is not None else None
+        hi = (self.le, "]") if self.le is not None else (self.lt, ")") if self.lt is not None else None
         if lo and hi:
-            return f"in {lo}, {hi}"
+            return f"in {lo[0]}{lo[1]:g}, {hi[0]:g}{hi[1]}"
         if lo:
-            return (">= " if lo[0] == "[" else "> ") + lo[1:]
+            return f"{'>=' if lo[0] == '[' else '>'} {lo[1]:g}"
         if hi:
-            return ("<= " if hi[-1] == "]" else "< ") + hi[:-1]
+            return f"{'<=' if hi[1] == ']' else '<'} {hi[0]:g}"
         return ""
 
     def type_text(self) -> str:
@@ -70,8 +70,8 @@ class Key:
             BOOL: "true or false",
             STR: "a string",
             INTS: "a non-empty list of integers",
-            FLOATS: f"a list of {self.size or ''} finite numbers",
-            BOOLS: f"a list of {self.size or ''} true/false values",
+            FLOATS: f"a list of {self.size or 'any number of'} finite numbers",
+            BOOLS: f"a list of {self.size or 'any number of'} true/false values",
             STRS: "a list of strings",
             DICTS: "a list of objects",
             BOX: BOX_SHAPE,
@@ -147,7 +147,7 @@ def check_value(path: str, key: Key, v, error=ConfigError) -> None:
         what = key.type_text() + (f", each {key.range_text()}" if key.range_text() else "")
     else:
         what = ", ".join(t for t in (key.range_text(), key.type_text()) if t)
-    bad = f"{path} must be {' '.join(what.split())}; got {v!r}"
+    bad = f"{path} must be {what}; got {v!r}"
     if key.kind == INT:
         ok = _is_int(v) and _in_range(key, v)
     elif key.kind == FLOAT:
