@@ -23,8 +23,10 @@ import hydra
 import torch
 from omegaconf import DictConfig, OmegaConf
 
-from flownav.builders import ConfigError, build_env, build_flow, build_task
+from flownav import schema
+from flownav.builders import build_env, build_flow, build_task
 from flownav.checkpoint import load_policy
+from flownav.errors import ConfigError, reported_as_one_line
 from flownav.evaluation.metrics import summarize
 from flownav.evaluation.rollout import run_episodes
 from flownav.paths import resolve
@@ -89,13 +91,14 @@ def run_paper(cfg: DictConfig, log=print) -> dict:
 
 
 def run(cfg: DictConfig, log=print) -> dict:
-    if cfg.threads:
-        torch.set_num_threads(int(cfg.threads))
     unknown = set(cfg.keys()) - KNOWN_KEYS
     if unknown:
         raise ConfigError(
             f"unknown top-level key(s) {sorted(unknown)} in the evaluate config; known: {sorted(KNOWN_KEYS)}"
         )
+    schema.check_evaluate(cfg)
+    if cfg.threads:
+        torch.set_num_threads(int(cfg.threads))
     if cfg.get("suite"):
         return run_paper(cfg, log)
     return evaluate_checkpoint(cfg, log)
@@ -125,7 +128,8 @@ KNOWN_KEYS = {
 @hydra.main(version_base="1.3", config_path="conf/evaluate", config_name="config")
 def main(cfg: DictConfig) -> None:
     OmegaConf.set_readonly(cfg, False)
-    run(cfg)
+    with reported_as_one_line():  # bad input: one line, exit status 2 (FLOWNAV_DEBUG=1: the traceback)
+        run(cfg)
 
 
 if __name__ == "__main__":

@@ -25,25 +25,14 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
+from flownav import schema
 from flownav.algorithms import ALGORITHMS
-from flownav.builders import ConfigError
-from flownav.runlog import WANDB_MODES
+from flownav.errors import reported_as_one_line
 
 
 def validate(cfg: DictConfig) -> None:
-    """Checks every trainer relies on; algorithm-specific ones live in the algorithm module."""
-    if cfg.algo.name not in ALGORITHMS:
-        raise ConfigError(f"algo.name is {cfg.algo.name!r}; choose one of {sorted(ALGORITHMS)}")
-    if cfg.logger.wandb.mode not in WANDB_MODES:
-        raise ConfigError(f"logger.wandb.mode is {cfg.logger.wandb.mode!r}; choose one of {list(WANDB_MODES)}")
-    if cfg.threads is not None and int(cfg.threads) < 1:
-        raise ConfigError(f"threads must be >= 1 or null, got {cfg.threads}")
-    try:
-        torch.device(cfg.device)
-    except RuntimeError as e:
-        raise ConfigError(f"device {cfg.device!r} is not a torch device ({e})") from e
-    if not isinstance(cfg.seed, int):
-        raise ConfigError(f"seed must be an integer, got {cfg.seed!r}")
+    """Every key against its group's schema (flownav.schema); cross-key checks live in the algorithm module."""
+    schema.check_train(cfg)
 
 
 def pick_threads(cfg: DictConfig) -> int:
@@ -88,7 +77,8 @@ def run(cfg: DictConfig, run_dir: str | Path) -> dict:
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="config")
 def main(cfg: DictConfig):
-    return run(cfg, HydraConfig.get().runtime.output_dir)
+    with reported_as_one_line():  # bad input: one line, exit status 2 (FLOWNAV_DEBUG=1: the traceback)
+        return run(cfg, HydraConfig.get().runtime.output_dir)
 
 
 if __name__ == "__main__":

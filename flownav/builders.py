@@ -1,6 +1,7 @@
 """Build flows, tasks and environments from the ``flow``, ``task`` and ``env`` config groups.
 
-Every value is checked here, so a bad config fails at start with a message naming the key.
+Each group is checked against its schema (:mod:`flownav.schema`) first, so a bad config fails at
+start with one line naming the key.
 """
 
 from __future__ import annotations
@@ -8,27 +9,24 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
+from flownav import schema
 from flownav.envs.navigation import NavigationEnv
 from flownav.envs.reward import RewardConfig
 from flownav.envs.tasks import FixedTargetTask, RegionTask, SymmetricTask
+from flownav.errors import ConfigError
 from flownav.flows.analytic import ABCFlow, UniformFlow
 from flownav.flows.base import Box, FlowField
 from flownav.flows.grid import load_grid_flow
 from flownav.flows.transforms import ScaledFlow
 from flownav.paths import DEFAULT_FLOW_DATASET, resolve
 
-
-class ConfigError(ValueError):
-    """A config value is wrong; the message names the key and what it accepts."""
+__all__ = ["ConfigError", "build_env", "build_flow", "build_task"]
 
 
-def _box(value, key: str) -> Box:
-    try:
-        lo, hi = value
-        box = Box(tuple(float(x) for x in lo), tuple(float(x) for x in hi))
-    except (TypeError, ValueError) as e:
-        raise ConfigError(f"{key} must be [[x0, y0, z0], [x1, y1, z1]] with x1 > x0 etc.; got {value} ({e})") from e
-    return box
+def _box(value) -> Box:
+    """A box the schema has checked: [[x0, y0, z0], [x1, y1, z1]]."""
+    lo, hi = value
+    return Box(tuple(float(x) for x in lo), tuple(float(x) for x in hi))
 
 
 def _scale_pi(value):
@@ -36,14 +34,9 @@ def _scale_pi(value):
     return [[float(x) * math.pi for x in corner] for corner in value]
 
 
-def _pick(cfg: Mapping, key: str, choices: Mapping):
-    kind = cfg.get("type")
-    if kind not in choices:
-        raise ConfigError(f"{key}.type is {kind!r}; choose one of {sorted(choices)}")
-    return choices[kind]
-
-
 def build_flow(cfg: Mapping, device="cpu") -> FlowField:
+    schema.check_flow(cfg)
+
     def grid():
         path = cfg.get("path") or DEFAULT_FLOW_DATASET
         return load_grid_flow(resolve(path), device=device)
@@ -51,13 +44,13 @@ def build_flow(cfg: Mapping, device="cpu") -> FlowField:
     def abc():
         kw = {k: float(cfg[k]) for k in ("A", "B", "C", "eps", "omega") if cfg.get(k) is not None}
         if cfg.get("bounds") is not None:
-            kw["bounds"] = _box(_scale_pi(cfg["bounds"]), "flow.bounds")
+            kw["bounds"] = _box(_scale_pi(cfg["bounds"]))
         return ABCFlow(**kw)
 
     def uniform():
         kw = {"velocity": tuple(float(v) for v in cfg.get("velocity", (1.0, 0.0, 0.0)))}
         if cfg.get("bounds") is not None:
-            kw["bounds"] = _box(cfg["bounds"], "flow.bounds")
+            kw["bounds"] = _box(cfg["bounds"])
         return UniformFlow(**kw)
 
     def vortex_street():
@@ -68,72 +61,51 @@ def build_flow(cfg: Mapping, device="cpu") -> FlowField:
         return VortexStreetFlow(**kw)
 
     kinds = {"grid": grid, "abc": abc, "uniform": uniform, "vortex_street": vortex_street}
-    flow = _pick(cfg, "flow", kinds)()
+    flow = kinds[cfg["type"]]()
     scale = float(cfg.get("speed_scale", 1.0))
-    if scale <= 0:
-        raise ConfigError(f"flow.speed_scale must be > 0, got {scale}")
     return ScaledFlow(flow, scale) if scale != 1.0 else flow
 
 
 def build_task(cfg: Mapping, flow: FlowField):
-    conv = (lambda v, k: _box(_scale_pi(v), k)) if cfg.get("in_pi") else _box
+    schema.check_task(cfg)
+    conv = (lambda v: _box(_scale_pi(v))) if cfg.get("in_pi") else _box
 
     def regions():
-        return RegionTask(conv(cfg["start"], "task.start"), conv(cfg["target"], "task.target"))
+        return RegionTask(conv(cfg["start"]), conv(cfg["target"]))
 
     def symmetric():
-        return SymmetricTask(conv(cfg["start"], "task.start"), conv(cfg["target"], "task.target"))
+        return SymmetricTask(conv(cfg["start"]), conv(cfg["target"]))
 
     def fixed_target():
-        start = flow.bounds if cfg.get("start") in (None, "domain") else conv(cfg["start"], "task.start")
-        target = cfg["target"]
-        if len(target) != 3:
-            raise ConfigError(f"task.target must be a point [x, y, z] for a fixed-target task, got {target}")
-        return FixedTargetTask(target=target, start=start)
+        start = flow.bounds if cfg.get("start") in (None, "domain") else conv(cfg["start"])
+        return FixedTargetTask(target=[float(x) for x in cfg["target"]], start=start)
 
-    return _pick(cfg, "task", {"regions": regions, "symmetric": symmetric, "fixed_target": fixed_target})()
-
-
-def _flow_strength(value):
-    """The config's shape and types; the range is NavigationEnv's to check (one place for both entry points)."""
-    if value is None:
-        return None
-    try:
-        low, high = (float(v) for v in value)
-    except (TypeError, ValueError) as e:
-        raise ConfigError(f"env.flow_strength must be null or [low, high], e.g. [0.0, 1.0]; got {value}") from e
-    return low, high
-
-
-def _fraction(value, key: str) -> float:
-    try:
-        return float(value or 0.0)
-    except (TypeError, ValueError) as e:
-        raise ConfigError(f"{key} must be a fraction in [0, 1], e.g. 0.5; got {value}") from e
+    return {"regions": regions, "symmetric": symmetric, "fixed_target": fixed_target}[cfg["type"]]()
 
 
 def build_env(
     env_cfg: Mapping, flow: FlowField, task, views, num_envs: int | None = None, seed: int = 0, device="cpu"
 ) -> NavigationEnv:
+    schema.check_env(env_cfg)
     reward = env_cfg.get("reward", {}) or {}
+    strength = env_cfg.get("flow_strength")
     try:
-        reward_cfg = RewardConfig(**{k: float(v) for k, v in reward.items()})
-    except TypeError as e:
-        raise ConfigError(f"env.reward has an unknown key ({e}); keys: {list(RewardConfig.__annotations__)}") from e
-    return NavigationEnv(
-        flow,
-        task,
-        num_envs=int(num_envs if num_envs is not None else env_cfg["num_envs"]),
-        views=tuple(views),
-        dt=float(env_cfg["dt"]),
-        time_limit=float(env_cfg["time_limit"]),
-        u_max=float(env_cfg["u_max"]),
-        swim_speed_scale=float(env_cfg.get("swim_speed_scale", 1.0)),
-        reward=reward_cfg,
-        misalignment_deg=float(env_cfg.get("misalignment_deg", 0.0)),
-        random_flow_phase=bool(env_cfg.get("random_flow_phase", True)),
-        flow_strength=_flow_strength(env_cfg.get("flow_strength")),
-        flow_strength_full=_fraction(env_cfg.get("flow_strength_full", 0.0), "env.flow_strength_full"),
-        seed=seed,
-        device=device,
-    )
+        return NavigationEnv(
+            flow,
+            task,
+            num_envs=int(num_envs if num_envs is not None else env_cfg["num_envs"]),
+            views=tuple(views),
+            dt=float(env_cfg["dt"]),
+            time_limit=float(env_cfg["time_limit"]),
+            u_max=float(env_cfg["u_max"]),
+            swim_speed_scale=float(env_cfg.get("swim_speed_scale", 1.0)),
+            reward=RewardConfig(**{k: float(v) for k, v in reward.items()}),
+            misalignment_deg=float(env_cfg.get("misalignment_deg", 0.0)),
+            random_flow_phase=bool(env_cfg.get("random_flow_phase", True)),
+            flow_strength=None if strength is None else tuple(float(v) for v in strength),
+            flow_strength_full=float(env_cfg.get("flow_strength_full") or 0.0),
+            seed=seed,
+            device=device,
+        )
+    except ValueError as e:  # a range that ties env keys together (NavigationEnv, RewardConfig check it)
+        raise ConfigError(f"env: {e}") from e

@@ -9,11 +9,15 @@ A checkpoint is a ``torch.save`` dict with ``format == "flownav-policy-v1"``:
 * ``train_state``: anything a resumed run needs (optimiser, step counters, RNG), optional.
 
 Writes are atomic (temporary file, then rename), so a kill never leaves half a checkpoint.
+Reads never run code: :func:`safe_torch_load` unpickles tensors and plain containers only
+(``weights_only=True``) and refuses anything else with a :class:`CheckpointError`.
 """
 
 from __future__ import annotations
 
 import os
+import pickle
+import re
 from pathlib import Path
 
 import torch
@@ -21,14 +25,12 @@ from tensordict.nn import TensorDictModule
 
 from flownav.agents.networks import DeterministicPolicy
 from flownav.atomic import atomic_write
-from flownav.builders import ConfigError
 from flownav.envs.observations import observation_size
+from flownav.errors import CheckpointError, ConfigError
+
+__all__ = ["CheckpointError", "load_checkpoint", "load_policy", "safe_torch_load", "save_policy_checkpoint"]
 
 FORMAT = "flownav-policy-v1"
-
-
-class CheckpointError(ValueError):
-    """A checkpoint is missing, corrupt or does not fit the requested set-up."""
 
 
 def atomic_torch_save(obj, path: str | os.PathLike) -> Path:
@@ -53,18 +55,40 @@ def save_policy_checkpoint(
     return atomic_torch_save(payload, path)
 
 
+def safe_torch_load(path, safe_globals=()):
+    """``torch.load`` that never runs code from the file: tensors, numbers, strings and containers only,
+    plus the ``safe_globals`` a caller allows by name. Anything else is a one-line :class:`CheckpointError`."""
+    try:
+        with torch.serialization.safe_globals(list(safe_globals)):
+            return torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as e:  # what weights_only refuses: a global it does not allow
+        found = re.search(r"GLOBAL (\S+)|but got <class '([^']+)'>", str(e))
+        what = (found.group(1) or found.group(2)) if found else "an object that is not a tensor or plain data"
+        raise CheckpointError(
+            f"refused to load {path}: it asks for {what}, which loading could run as code; "
+            "load only checkpoints written by flownav (tensors, numbers, strings, lists, dicts)"
+        ) from e
+    except Exception as e:  # noqa: BLE001 - any other unpickling failure means a corrupt file
+        raise CheckpointError(f"cannot read checkpoint {path} ({e}); it is corrupt or not a flownav checkpoint") from e
+
+
 def load_checkpoint(path) -> dict:
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(
             f"no checkpoint at {path}: train one (python train.py +experiment=teacher) or fix the path"
         )
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as e:  # noqa: BLE001 - any unpickling failure means a corrupt file
-        raise CheckpointError(f"cannot read checkpoint {path} ({e}); it is corrupt or not a flownav checkpoint") from e
+    payload = safe_torch_load(path)
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         raise CheckpointError(f"{path} is not a {FORMAT} checkpoint")
+    policy = payload.get("policy")
+    missing = [k for k in ("obs", "role", "policy") if k not in payload]
+    missing += [f"policy.{k}" for k in ("config", "state_dict") if not isinstance(policy, dict) or k not in policy]
+    if missing:
+        raise CheckpointError(
+            f"{path} lacks {missing[0]!r}: it is an incomplete {FORMAT} checkpoint; use the run's last.pt or "
+            "best.pt, or a file written by save_policy_checkpoint"
+        )
     return payload
 
 

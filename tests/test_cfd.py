@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import math
 
 import numpy as np
@@ -189,7 +190,7 @@ def test_generate_writes_a_loadable_periodic_dataset(tmp_path):
     from flownav.flows.grid import load_grid_flow
 
     sim = SimConfig(re=100, cells_per_d=4, u_lattice=0.15, x_range=(-5, 26), y_half=7.5, span=2.0)
-    cfg = GenerateConfig(sim=sim, warmup=12.0, record=14.0, frame_dt=0.5, out_spacing=0.5, min_periods=1)
+    cfg = GenerateConfig(sim=sim, warmup=12.0, record=14.0, frame_dt=0.45, out_spacing=0.5, min_periods=1)
     _, state = simulate(cfg, tmp_path / "run")
     diag = write_dataset(cfg, state, tmp_path / "data", command="test")
     flow = load_grid_flow(tmp_path / "data")
@@ -202,3 +203,82 @@ def test_generate_writes_a_loadable_periodic_dataset(tmp_path):
     # Inside the cylinder the stored velocity is zero.
     u = flow.velocity(torch.tensor([[0.0, 0.0, 1.0], [5.0, 0.0, 1.0]]), torch.zeros(2))
     assert u[0].abs().max() == 0 and u[1].abs().max() > 0.05
+
+
+def test_kernel_cache_is_keyed_by_the_cpu():
+    ckernel.load("D3Q19")
+    here = ckernel.library_file("D3Q19")
+    assert here.exists()  # the kernel this process loaded was built for this CPU
+    assert ckernel.library_file("D3Q19", cpu="x86_64|other model|sse2") != here
+    assert ckernel.cpu_signature() and ckernel.library_file("D3Q19", cpu=ckernel.cpu_signature()) == here
+
+
+def test_a_run_outside_the_tolerance_says_so_in_one_warning_block():
+    from flownav.cfd.validate import check_wake_3d, tolerance_warning
+
+    good = {"St": 0.205, "Cd_mean": 1.3, "rms_w_near_wake": 0.05}
+    assert tolerance_warning(check_wake_3d(good)) == ""
+    block = tolerance_warning(check_wake_3d({**good, "St": 0.77}))
+    lines = block.splitlines()
+    assert lines[0] == lines[-1] == "=" * 78 and lines[1].startswith("WARNING: this wake is OUTSIDE")
+    assert "  St = 0.77, reference 0.203 +- 7% (off by 279%)" in lines and not any("Cd =" in ln for ln in lines)
+
+
+def test_generate_help_gives_every_option_its_default():
+    from flownav.cfd.__main__ import parser
+
+    gen = parser()._subparsers._group_actions[0].choices["generate"]
+    text = " ".join(gen.format_help().split())
+    for action in gen._actions:
+        if action.dest == "help":
+            continue
+        assert action.help, action.dest
+        stated = f"default: {action.default}" if action.default is not argparse.SUPPRESS else "default: <run-dir>"
+        assert stated.replace("[", "").split(",")[0] in text.replace("[", ""), action.dest
+    assert "--out data/cylinder_re300" in text  # the shipped dataset is written only when named
+
+
+def test_generator_refuses_fractional_lattice_steps_and_non_positive_sizes():
+    from flownav.cfd.dataset import GenerateConfig
+    from flownav.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"frame_dt \(--frame-dt\) = 0.31 D/U is 37.2 lattice steps"):
+        GenerateConfig(frame_dt=0.31).check()
+    with pytest.raises(ConfigError, match=r"warmup \(--warmup\) = 80.004 D/U is 9600.48 lattice steps"):
+        GenerateConfig(warmup=80.004).check()
+    with pytest.raises(ConfigError, match="record .* must be a positive number of D/U"):
+        GenerateConfig(record=0.0).check()
+    with pytest.raises(ConfigError, match=r"span \(--span\) must be a positive number"):
+        SimConfig(span=0.0)
+    GenerateConfig().check()  # the shipped dataset's settings: 30 and 9600 steps
+
+
+@pytest.mark.slow
+def test_interrupted_generate_resumes_to_the_identical_dataset(tmp_path, monkeypatch):
+    from flownav.cfd.dataset import GenerateConfig, generate
+    from flownav.cfd.validate import check_wake_3d, tolerance_warning
+
+    sim = SimConfig(re=100, cells_per_d=4, u_lattice=0.15, x_range=(-5, 26), y_half=7.5, span=2.0)
+    cfg = GenerateConfig(sim=sim, warmup=12.0, record=14.0, frame_dt=0.45, out_spacing=0.5, min_periods=1)
+    diag = generate(cfg, None, tmp_path / "whole")  # --out not given: the dataset goes into the run directory
+    assert (tmp_path / "whole" / "dataset" / "velocity.npy").is_file()
+
+    step = CylinderLBM.step
+
+    def failing_step(self, n=1):
+        if self.steps >= 500:  # after the warm-up (320 steps), frames already recorded
+            raise RuntimeError("injected failure")
+        step(self, n)
+
+    monkeypatch.setattr(CylinderLBM, "step", failing_step)
+    with pytest.raises(RuntimeError, match="injected"):
+        generate(cfg, tmp_path / "out", tmp_path / "cut", checkpoint_every_s=0.0)
+    monkeypatch.setattr(CylinderLBM, "step", step)
+    assert not (tmp_path / "out").exists()
+    resumed = generate(cfg, tmp_path / "out", tmp_path / "cut", checkpoint_every_s=0.0)
+
+    for name in ("velocity.npy", "history.npz"):
+        assert (tmp_path / "out" / name).read_bytes() == (tmp_path / "whole" / "dataset" / name).read_bytes(), name
+    assert resumed == diag
+    # Re = 100 on 4 cells per D is no Re = 300 wake: the generator's closing warning names it.
+    assert "WARNING: this wake is OUTSIDE" in tolerance_warning(check_wake_3d(diag), re=100)

@@ -96,3 +96,35 @@ class DeterministicPolicy(nn.Module):
 
     def forward(self, obs: Tensor) -> Tensor:
         return self.squash(self.net(self.normalizer(obs))[..., : self.action_dim])
+
+    def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
+        check_mlp_size(state_dict, self.config, "algo.actor.hidden={hidden} (PPO) or algo.hidden={hidden} (DAgger)")
+        return super().load_state_dict(state_dict, strict=strict, assign=assign)
+
+
+def check_mlp_size(state_dict, config: dict, fix: str) -> None:
+    """Refuse, in one line naming the sizes and the ``fix`` (a key to set, ``{hidden}`` the saved sizes),
+    the weights of an MLP (``net.*``) of another shape than ``config`` (``obs_dim``, ``hidden``, ``n_outputs``)."""
+    weights = [state_dict[k] for k in sorted(state_dict, key=_layer_index) if _layer_index(k) >= 0]
+    if not weights:
+        return
+    saved = {
+        "obs_dim": weights[0].shape[1],
+        "hidden": [w.shape[0] for w in weights[:-1]],
+        "n_outputs": weights[-1].shape[0],
+    }
+    mine = {k: config[k] for k in saved}
+    if saved != mine:
+        from flownav.errors import CheckpointError
+
+        raise CheckpointError(
+            f"the checkpoint's network was trained with hidden={saved['hidden']} ({saved['obs_dim']} inputs, "
+            f"{saved['n_outputs']} outputs) but this one has hidden={mine['hidden']} ({mine['obs_dim']} inputs, "
+            f"{mine['n_outputs']} outputs): set {fix.format(hidden=saved['hidden'])} or use a checkpoint of this size"
+        )
+
+
+def _layer_index(key: str) -> int:
+    """Index of an MLP layer's weight (``net.<i>.weight``) in a state dict, -1 for other entries."""
+    parts = key.split(".")
+    return int(parts[1]) if len(parts) == 3 and parts[0] == "net" and parts[2] == "weight" else -1

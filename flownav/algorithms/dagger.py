@@ -45,6 +45,7 @@ from flownav.checkpoint import (
     atomic_torch_save,
     load_policy,
     load_resume_checkpoint,
+    safe_torch_load,
     save_policy_checkpoint,
 )
 from flownav.envs.navigation import Status
@@ -187,7 +188,7 @@ def train(cfg, run_dir) -> dict:
         buf_path = path.parent / st["buffer_file"]
         if not buf_path.is_file():
             raise ConfigError(f"resume={cfg.resume}: {buf_path} (the aggregated data) is missing")
-        buffer.load_state_dict(torch.load(buf_path, weights_only=False))
+        buffer.load_state_dict(safe_torch_load(buf_path))
         iteration, frames, wall_offset = int(st["iteration"]), int(st["frames"]), float(st["wall_time"])
         history = list(st.get("history", []))
         torch.set_rng_state(st["rng"]["torch"])

@@ -31,12 +31,12 @@ from torchrl.modules import ProbabilisticActor, TanhNormal, ValueOperator
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
-from flownav.agents.networks import ACTIVATIONS, DeterministicPolicy, ObsNormalizer, mlp
+from flownav.agents.networks import DeterministicPolicy, ObsNormalizer, check_mlp_size, mlp
 from flownav.atomic import atomic_copy
 from flownav.builders import ConfigError, build_env, build_flow, build_task
 from flownav.checkpoint import load_checkpoint, load_resume_checkpoint, save_policy_checkpoint
 from flownav.envs.navigation import NavigationEnv, Status
-from flownav.envs.observations import GEO_VIEWS, VIEWS, observation_size
+from flownav.envs.observations import GEO_VIEWS, observation_size
 from flownav.evaluation.rollout import run_episodes
 from flownav.paths import resolve
 from flownav.runlog import RunLogger
@@ -67,6 +67,12 @@ class CriticNet(nn.Module):
 
     def forward(self, obs):
         return self.net(self.normalizer(obs))
+
+    def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
+        config = {"obs_dim": self.normalizer.mean.shape[0], "n_outputs": 1}
+        config["hidden"] = [m.out_features for m in self.net if isinstance(m, nn.Linear)][:-1]
+        check_mlp_size(state_dict, config, "algo.critic.hidden={hidden}")
+        return super().load_state_dict(state_dict, strict=strict, assign=assign)
 
 
 def _init_output_layer(seq: nn.Sequential, gain: float):
@@ -103,45 +109,15 @@ def make_actor_critic(obs_key: str, critic_key: str, low, high, actor_cfg, criti
 @torch.no_grad()
 # ----------------------------------------------------------------------------- config checks
 def check_config(cfg) -> None:
-    """Fail at start, naming the key, on values Hydra's types cannot catch."""
+    """Checks that tie keys together; each key's type and range is in flownav.schema (train.py checks it)."""
     a = cfg.algo
-    obs = cfg.obs
-    for key in ("view", "critic_view"):
-        v = obs.get(key)
-        if v is not None and v not in VIEWS:
-            raise ConfigError(f"obs.{key} is {v!r}; choose one of {sorted(VIEWS)}")
-    positive = ("total_frames", "rollout_steps", "epochs", "minibatch_size", "lr", "max_grad_norm")
-    for key in positive:
-        if not a[key] > 0:
-            raise ConfigError(f"algo.{key} must be > 0, got {a[key]}")
-    for key in ("gamma", "lmbda"):
-        if not 0.0 < a[key] <= 1.0:
-            raise ConfigError(f"algo.{key} must be in (0, 1], got {a[key]}")
-    if not 0.0 < a.clip_epsilon < 1.0:
-        raise ConfigError(f"algo.clip_epsilon must be in (0, 1), got {a.clip_epsilon}")
-    for key in ("eval_every", "eval_episodes", "final_eval_episodes"):
-        if int(a.get(key) or 0) < 0:
-            raise ConfigError(f"algo.{key} must be >= 0 (0 = off), got {a[key]}")
     if int(a.get("eval_every") or 0) % int(a.log_every):
         raise ConfigError(f"algo.eval_every ({a.eval_every}) must be a multiple of algo.log_every ({a.log_every})")
-    if a.entropy_coeff < 0 or a.critic_coeff < 0:
-        raise ConfigError("algo.entropy_coeff and algo.critic_coeff must be >= 0")
-    if a.loss_critic_type not in LOSS_CRITIC_TYPES:
-        raise ConfigError(f"algo.loss_critic_type is {a.loss_critic_type!r}; choose one of {list(LOSS_CRITIC_TYPES)}")
-    for net in ("actor", "critic"):
-        if a[net].activation not in ACTIVATIONS:
-            raise ConfigError(f"algo.{net}.activation is {a[net].activation!r}; choose one of {sorted(ACTIVATIONS)}")
-        if not a[net].hidden or any(int(h) <= 0 for h in a[net].hidden):
-            raise ConfigError(f"algo.{net}.hidden must be a non-empty list of positive sizes, got {a[net].hidden}")
-    if not a.actor.init_scale > 0:
-        raise ConfigError(f"algo.actor.init_scale must be > 0, got {a.actor.init_scale}")
     frames = int(cfg.env.num_envs) * int(a.rollout_steps)
     if a.minibatch_size > frames:
         raise ConfigError(
             f"algo.minibatch_size ({a.minibatch_size}) exceeds a batch of env.num_envs x algo.rollout_steps = {frames}"
         )
-    if cfg.checkpoint_every is not None and cfg.checkpoint_every < 1:
-        raise ConfigError(f"checkpoint_every must be >= 1 iteration (or null), got {cfg.checkpoint_every}")
 
 
 # ----------------------------------------------------------------------------- evaluation

@@ -1,79 +1,120 @@
 """Command line: ``python -m flownav.cfd {generate,validate,plot}``.
 
-generate  run the 3D Re = 300 wake (resumes from runs/cfd/...) and write data/cylinder_re300
-validate  2D Re = 100 check against the literature + the shipped 3D dataset's diagnostics
-plot      z-vorticity slice and Q-criterion view of the shipped wake -> docs/figures/
+generate  run the 3D Re = 300 wake (resumes from --run-dir) and write the dataset to --out
+          (default <run-dir>/dataset; the shipped data/cylinder_re300 only when --out names it)
+validate  2D Re = 100 check against the literature + a 3D dataset's diagnostics
+plot      z-vorticity slice and Q-criterion view of a wake dataset -> docs/figures/
+
+Lengths are in cylinder diameters D, velocities in the inflow speed U, times in D/U.
+Set FLOWNAV_DEBUG=1 to see the traceback of an error.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
 import torch
 
-from flownav.cfd.dataset import DEFAULT_OUT, DEFAULT_RUN_DIR, GenerateConfig
+from flownav.cfd.dataset import DEFAULT_RUN_DIR, SHIPPED_DATASET, GenerateConfig
+from flownav.cfd.runner import CHECKPOINT_EVERY_S
 from flownav.cfd.solver import SimConfig
+from flownav.errors import ConfigError, reported_as_one_line
+
+
+class _Help(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    """Keep the description's layout and append every option's default."""
 
 
 def _sim_args(p: argparse.ArgumentParser, defaults: SimConfig) -> None:
-    p.add_argument("--re", type=float, default=defaults.re)
-    p.add_argument("--cells-per-d", type=int, default=defaults.cells_per_d)
-    p.add_argument("--u-lattice", type=float, default=defaults.u_lattice)
-    p.add_argument("--x-range", type=float, nargs=2, default=list(defaults.x_range))
-    p.add_argument("--y-half", type=float, default=defaults.y_half)
-    p.add_argument("--sponge", type=float, default=defaults.sponge)
-    p.add_argument("--lattice", default=defaults.lattice, choices=["D3Q19", "D3Q27"])
-    p.add_argument("--seed", type=int, default=defaults.seed)
+    p.add_argument("--re", type=float, default=defaults.re, help="Reynolds number U D / nu")
+    p.add_argument("--cells-per-d", type=int, default=defaults.cells_per_d, help="lattice cells per diameter D")
+    p.add_argument(
+        "--u-lattice",
+        type=float,
+        default=defaults.u_lattice,
+        help="inflow speed in lattice units (lattice Mach number = u_lattice * sqrt(3)); also sets the time step",
+    )
+    p.add_argument("--x-range", type=float, nargs=2, default=list(defaults.x_range), help="lattice x extent, D")
+    p.add_argument("--y-half", type=float, default=defaults.y_half, help="lattice half-width in y (periodic), D")
+    p.add_argument("--sponge", type=float, default=defaults.sponge, help="outlet sponge length, D")
+    p.add_argument("--lattice", default=defaults.lattice, choices=["D3Q19", "D3Q27"], help="velocity set")
+    p.add_argument("--seed", type=int, default=defaults.seed, help="seed of the initial perturbation")
+
+
+def parser() -> argparse.ArgumentParser:
+    top = argparse.ArgumentParser(prog="python -m flownav.cfd", description=__doc__, formatter_class=_Help)
+    top.add_argument("--threads", type=int, default=2, help="torch / OpenMP threads")
+    top.add_argument("--device", default="cpu", help="torch device (cpu runs the C kernel)")
+    sub = top.add_subparsers(dest="cmd", required=True)
+
+    gen = sub.add_parser("generate", help="simulate and write a wake dataset", formatter_class=_Help)
+    g_def = GenerateConfig()
+    _sim_args(gen, g_def.sim)
+    gen.add_argument("--span", type=float, default=g_def.sim.span, help="periodic span Lz, D")
+    gen.add_argument("--warmup", type=float, default=g_def.warmup, help="time before recording, D/U (whole steps)")
+    gen.add_argument("--record", type=float, default=g_def.record, help="time recorded after the warm-up, D/U")
+    gen.add_argument(
+        "--frame-dt", type=float, default=g_def.frame_dt, help="time between stored frames, D/U (whole steps)"
+    )
+    gen.add_argument("--out-spacing", type=float, default=g_def.out_spacing, help="stored grid spacing, D")
+    gen.add_argument(
+        "--out",
+        type=Path,
+        default=argparse.SUPPRESS,
+        help=f"dataset directory (default: <run-dir>/dataset); the shipped one only with --out {SHIPPED_DATASET}",
+    )
+    gen.add_argument("--run-dir", type=Path, default=DEFAULT_RUN_DIR, help="checkpoint and config of the run")
+    gen.add_argument(
+        "--checkpoint-every",
+        type=float,
+        default=CHECKPOINT_EVERY_S,
+        help="wall-clock seconds between checkpoints (0: every sample); a kill loses at most this much",
+    )
+
+    val = sub.add_parser("validate", help="2D Re=100 run + 3D dataset check", formatter_class=_Help)
+    val.add_argument("--dataset", type=Path, default=SHIPPED_DATASET, help="3D dataset whose diagnostics to check")
+    val.add_argument("--run-dir", type=Path, default=Path("runs/cfd/validate_2d_re100"), help="2D run directory")
+    val.add_argument(
+        "--out",
+        type=Path,
+        default=argparse.SUPPRESS,
+        help="result JSON (default: <run-dir>/validation.json); the shipped one: --out results/cfd_validation.json",
+    )
+    val.add_argument(
+        "--cells-per-d", type=int, default=argparse.SUPPRESS, help="2D resolution, cells per D (default: 10)"
+    )
+
+    plot = sub.add_parser("plot", help="wake figures", formatter_class=_Help)
+    plot.add_argument("--dataset", type=Path, default=SHIPPED_DATASET, help="wake dataset to draw")
+    plot.add_argument("--out-dir", type=Path, default=Path("docs/figures"), help="where wake_*.png go")
+    plot.add_argument("--frame", type=int, default=0, help="frame index")
+    return top
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(
-        prog="python -m flownav.cfd",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    parser.add_argument("--threads", type=int, default=2, help="torch / OpenMP threads")
-    parser.add_argument("--device", default="cpu")
-    sub = parser.add_subparsers(dest="cmd", required=True)
-
-    gen = sub.add_parser("generate", help="simulate and write the default dataset")
-    g_def = GenerateConfig()
-    _sim_args(gen, g_def.sim)
-    gen.add_argument("--span", type=float, default=g_def.sim.span)
-    gen.add_argument("--warmup", type=float, default=g_def.warmup)
-    gen.add_argument("--record", type=float, default=g_def.record)
-    gen.add_argument("--frame-dt", type=float, default=g_def.frame_dt)
-    gen.add_argument("--out-spacing", type=float, default=g_def.out_spacing)
-    gen.add_argument("--out", type=Path, default=DEFAULT_OUT)
-    gen.add_argument("--run-dir", type=Path, default=DEFAULT_RUN_DIR)
-
-    val = sub.add_parser("validate", help="2D Re=100 run + 3D dataset check -> results/cfd_validation.json")
-    val.add_argument("--dataset", type=Path, default=DEFAULT_OUT)
-    val.add_argument("--out", type=Path, default=Path("results/cfd_validation.json"))
-    val.add_argument("--run-dir", type=Path, default=Path("runs/cfd/validate_2d_re100"))
-    val.add_argument("--cells-per-d", type=int, default=None, help="2D resolution (default in validate.py)")
-
-    plot = sub.add_parser("plot", help="wake figures -> docs/figures/wake_*.png")
-    plot.add_argument("--dataset", type=Path, default=DEFAULT_OUT)
-    plot.add_argument("--out-dir", type=Path, default=Path("docs/figures"))
-    plot.add_argument("--frame", type=int, default=0)
-
-    args = parser.parse_args(argv)
-    try:
-        _run(args)
-    except (ValueError, FloatingPointError) as e:  # bad input or a diverged run: say how to fix it
-        raise SystemExit(f"error: {e}") from None
+    args = parser().parse_args(argv)
+    with reported_as_one_line():
+        try:
+            _run(args)
+        except FloatingPointError as e:  # a diverged run: the message says how to fix it
+            raise ConfigError(str(e)) from e
 
 
 def _run(args: argparse.Namespace) -> None:
+    if args.threads < 1:
+        raise ConfigError(f"--threads must be >= 1, got {args.threads}")
     torch.set_num_threads(args.threads)
     t0 = time.time()
     if args.cmd == "generate":
         from flownav.cfd.dataset import generate
+        from flownav.cfd.validate import check_wake_3d, tolerance_warning
 
+        if args.checkpoint_every < 0:
+            raise ConfigError(f"--checkpoint-every must be >= 0 seconds, got {args.checkpoint_every}")
         sim = SimConfig(
             re=args.re,
             cells_per_d=args.cells_per_d,
@@ -92,7 +133,9 @@ def _run(args: argparse.Namespace) -> None:
             frame_dt=args.frame_dt,
             out_spacing=args.out_spacing,
         )
-        diag = generate(cfg, args.out, args.run_dir, args.device)
+        cfg.check()
+        out = getattr(args, "out", args.run_dir / "dataset")
+        diag = generate(cfg, out, args.run_dir, args.device, args.checkpoint_every)
         keys = (
             "St",
             "St_probe_spectrum",
@@ -104,12 +147,17 @@ def _run(args: argparse.Namespace) -> None:
             "frames_per_period",
         )
         print(json.dumps({k: diag[k] for k in keys}, indent=2))
-        print(f"wrote {args.out} in {time.time() - t0:.0f} s")
+        print(f"wrote {out} in {time.time() - t0:.0f} s")
+        warning = tolerance_warning(check_wake_3d(diag), sim.re)
+        if warning:
+            print(warning, file=sys.stderr, flush=True)
     elif args.cmd == "validate":
         from flownav.cfd.validate import validate
 
-        result = validate(args.dataset, args.out, args.run_dir, args.cells_per_d, args.device)
+        out = getattr(args, "out", args.run_dir / "validation.json")
+        result = validate(args.dataset, out, args.run_dir, getattr(args, "cells_per_d", None), args.device)
         print(json.dumps(result["summary"], indent=2))
+        print(f"wrote {out}")
         if not result["summary"]["all_passed"]:
             raise SystemExit(1)
     elif args.cmd == "plot":

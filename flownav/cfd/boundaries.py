@@ -20,6 +20,7 @@ import torch
 from torch import Tensor
 
 from flownav.cfd.lattice import Lattice
+from flownav.errors import ConfigError
 
 
 @dataclass
@@ -75,7 +76,7 @@ def cylinder_links(lat: Lattice, grid, center_lat, radius_lat, device="cpu") -> 
             back = 0 <= a - cx < nx and 0 <= b - cy < ny and not solid2[a - cx, b - cy]
             links.append((node_of[a, b], i, q, back))
     if not links:
-        raise ValueError("the cylinder covers no lattice node; check its position and the resolution")
+        raise ConfigError("the cylinder covers no lattice node; check its position and the resolution")
     nodes2 = np.array(nodes2)
     z = np.arange(nz)
     # Replicate over the span: boundary node (k2, z) has id k2 * nz + z.

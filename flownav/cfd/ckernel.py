@@ -21,6 +21,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
+import platform
 import subprocess
 import tempfile
 from functools import cache
@@ -162,21 +163,43 @@ def _cache_dir() -> Path:
 
 
 @cache
+def cpu_signature() -> str:
+    """The CPU a ``-march=native`` build is for: machine, model name and feature flags (Linux), so a
+    shared cache on a cluster with mixed nodes never hands one node a kernel built for another."""
+    parts = [platform.machine(), platform.processor()]
+    try:
+        info = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        info = ""
+    for field in ("model name", "flags", "Features", "CPU part"):  # x86 and ARM spellings
+        line = next((ln for ln in info.splitlines() if ln.split(":")[0].strip() == field), "")
+        parts.append(line.split(":", 1)[-1].strip())
+    return "|".join(parts)
+
+
+FLAGS = (
+    "-O3",
+    "-march=native",
+    "-fopenmp",
+    "-fno-math-errno",
+    "-fno-trapping-math",
+    "-mprefer-vector-width=512",
+    "-shared",
+    "-fPIC",
+)
+
+
+def library_file(lattice: str, cpu: str | None = None) -> Path:
+    """Where the kernel of ``lattice`` built for ``cpu`` (default: this one) is cached."""
+    text = "\n".join((source(get_lattice(lattice)), " ".join(FLAGS), cpu if cpu is not None else cpu_signature()))
+    return _cache_dir() / f"lbm_{lattice}_{hashlib.sha256(text.encode()).hexdigest()[:16]}.so"
+
+
+@cache
 def load(lattice: str):
-    """Compile (once, cached by source hash) and load the kernel library for a lattice."""
-    src = source(get_lattice(lattice))
-    flags = [
-        "-O3",
-        "-march=native",
-        "-fopenmp",
-        "-fno-math-errno",
-        "-fno-trapping-math",
-        "-mprefer-vector-width=512",
-        "-shared",
-        "-fPIC",
-    ]
-    key = hashlib.sha256((src + " ".join(flags)).encode()).hexdigest()[:16]
-    so = _cache_dir() / f"lbm_{lattice}_{key}.so"
+    """Compile (once per source, flags and CPU) and load the kernel library for a lattice."""
+    src, flags = source(get_lattice(lattice)), list(FLAGS)
+    so = library_file(lattice)
     if not so.exists():
         with tempfile.TemporaryDirectory() as tmp:
             c_file = Path(tmp) / "lbm.c"

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import math
 import shlex
 import sys
 from dataclasses import dataclass, field
@@ -18,16 +19,17 @@ import numpy as np
 import torch
 
 from flownav.cfd import diagnostics
-from flownav.cfd.runner import RunState, run
+from flownav.cfd.runner import CHECKPOINT_EVERY_S, RunState, run
 from flownav.cfd.solver import CylinderLBM, SimConfig
+from flownav.cfd.validate import REF_3D
+from flownav.errors import ConfigError
 from flownav.flows.base import WAKE_BOUNDS, Cylinder
 from flownav.flows.grid import loop_seam_jump, save_grid_flow
 
 NAV_BOX = WAKE_BOUNDS  # the stored grid covers the navigation box exactly
-DEFAULT_OUT = Path("data/cylinder_re300")
+SHIPPED_DATASET = Path("data/cylinder_re300")  # written only when --out names it
 DEFAULT_RUN_DIR = Path("runs/cfd/cylinder_re300")
 MAX_BYTES = 50_000_000  # the repository budget for velocity.npy
-REF_3D = {"St": 0.203, "Cd": 1.27}
 
 
 @dataclass(frozen=True)
@@ -40,22 +42,38 @@ class GenerateConfig:
     min_periods: int = 3
 
     def check(self) -> None:
+        sizes = {"warmup": (self.warmup, "D/U"), "record": (self.record, "D/U"), "frame_dt": (self.frame_dt, "D/U")}
+        sizes["out_spacing"] = (self.out_spacing, "D")
+        for name, (value, unit) in sizes.items():
+            if not (value > 0 and math.isfinite(value)):
+                flag = "--" + name.replace("_", "-")
+                raise ConfigError(f"{name} ({flag}) must be a positive number of {unit}, got {value}")
+        if self.min_periods < 1:
+            raise ConfigError(f"min_periods must be >= 1, got {self.min_periods}")
+        for name in ("warmup", "frame_dt"):  # frames are taken at whole lattice steps; anything else drifts
+            steps = getattr(self, name) / self.sim.dt
+            if abs(steps - round(steps)) > 1e-6 * max(1.0, steps) or round(steps) < 1:
+                good = max(1, round(steps)) * self.sim.dt
+                raise ConfigError(
+                    f"{name} (--{name.replace('_', '-')}) = {getattr(self, name)} D/U is {steps:.6g} lattice steps of "
+                    f"{self.sim.dt:.6g} D/U; use a whole number of steps, e.g. {good:.6g}"
+                )
         r = self.out_spacing / self.sim.dx
         if abs(r - round(r)) > 1e-6 or round(r) < 1:
-            raise ValueError(
+            raise ConfigError(
                 f"out_spacing {self.out_spacing} is not a multiple of the lattice spacing "
                 f"{self.sim.dx}; "
                 "pick e.g. 2 / cells_per_d"
             )
         if self.sim.span is None:
-            raise ValueError("the dataset needs a 3D run: set span (>= 4 D)")
+            raise ConfigError("the dataset needs a 3D run: set span (>= 4 D)")
         nz = self.sim.span / self.out_spacing
         if abs(nz - round(nz)) > 1e-6:
-            raise ValueError(f"out_spacing {self.out_spacing} must divide the span {self.sim.span}")
+            raise ConfigError(f"out_spacing {self.out_spacing} must divide the span {self.sim.span}")
         lo, hi = NAV_BOX.lo, NAV_BOX.hi
         x0, x1 = self.sim.x_range
         if not (x0 < lo[0] and x1 - self.sim.sponge > hi[0] and self.sim.y_half > hi[1]):
-            raise ValueError(
+            raise ConfigError(
                 f"the lattice x {self.sim.x_range} (outlet sponge {self.sim.sponge} D), |y| < {self.sim.y_half} "
                 f"must contain {NAV_BOX} ahead of the sponge; widen --x-range / --y-half"
             )
@@ -89,7 +107,9 @@ def frame_sampler(cfg: GenerateConfig):
     return frame
 
 
-def simulate(cfg: GenerateConfig, run_dir: Path, device="cpu") -> tuple[CylinderLBM, RunState]:
+def simulate(
+    cfg: GenerateConfig, run_dir: Path, device="cpu", checkpoint_every_s: float = CHECKPOINT_EVERY_S
+) -> tuple[CylinderLBM, RunState]:
     cfg.check()
     sim = CylinderLBM(cfg.sim, device=device)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -101,6 +121,7 @@ def simulate(cfg: GenerateConfig, run_dir: Path, device="cpu") -> tuple[Cylinder
         frame_dt=cfg.frame_dt,
         record_from=cfg.warmup,
         frame_fn=frame_sampler(cfg),
+        checkpoint_every_s=checkpoint_every_s,
         desc=f"cylinder Re={cfg.sim.re:g}",
     )
     return sim, state
@@ -115,7 +136,7 @@ def wake_diagnostics(cfg: GenerateConfig, state: RunState) -> dict:
     h = state.history()
     sel = h["t"] >= cfg.warmup
     if sel.sum() < 16:
-        raise ValueError("too few samples after the warm-up to measure the wake; record longer")
+        raise ConfigError("too few samples after the warm-up to measure the wake; record longer")
     t = h["t"][sel]
     stats = diagnostics.force_stats(t, h["cd"][sel], h["cl"][sel])
     dts = float(np.median(np.diff(t)))
@@ -133,6 +154,8 @@ def wake_diagnostics(cfg: GenerateConfig, state: RunState) -> dict:
 
 def write_dataset(cfg: GenerateConfig, state: RunState, out: Path, command: str) -> dict:
     stats = wake_diagnostics(cfg, state)
+    if not state.frames:
+        raise ConfigError(f"no frames were recorded: --record ({cfg.record}) must cover --frame-dt ({cfg.frame_dt})")
     frames = np.stack(state.frames)  # [F, Nx, Ny, Nz, 3]
     period_frames = 1.0 / (stats["St"] * cfg.frame_dt)
     frame_bytes = frames[0].nbytes
@@ -213,7 +236,15 @@ def write_dataset(cfg: GenerateConfig, state: RunState, out: Path, command: str)
     return diag
 
 
-def generate(cfg: GenerateConfig, out: Path = DEFAULT_OUT, run_dir: Path = DEFAULT_RUN_DIR, device="cpu") -> dict:
-    _, state = simulate(cfg, run_dir, device)
+def generate(
+    cfg: GenerateConfig,
+    out: Path | None = None,
+    run_dir: Path = DEFAULT_RUN_DIR,
+    device="cpu",
+    checkpoint_every_s: float = CHECKPOINT_EVERY_S,
+) -> dict:
+    """Simulate (resuming from ``run_dir``) and write the dataset to ``out`` (default: ``run_dir/dataset``)."""
+    _, state = simulate(cfg, run_dir, device, checkpoint_every_s)
+    out = run_dir / "dataset" if out is None else out
     command = "python -m flownav.cfd " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     return write_dataset(cfg, state, out, command)

@@ -7,12 +7,14 @@ import math
 
 import numpy as np
 
+from flownav.errors import ConfigError
+
 
 def dominant_frequency(signal: np.ndarray, dt: float) -> float:
     """Peak frequency of a uniformly sampled signal (Hann window, zero padding, parabolic peak)."""
     x = np.asarray(signal, dtype=np.float64)
     if len(x) < 8:
-        raise ValueError(f"need >= 8 samples for a spectrum, got {len(x)}; run longer")
+        raise ConfigError(f"need >= 8 samples for a spectrum, got {len(x)}; run longer")
     x = x - x.mean()
     n = 16 * len(x)
     spec = np.abs(np.fft.rfft(x * np.hanning(len(x)), n=n))
@@ -88,7 +90,7 @@ def best_loop_window(
                     best = (jump, s, T, n)
         n += 1
     if best is None:
-        raise ValueError(
+        raise ConfigError(
             f"{n_frames} frames (max {max_frames} stored) do not hold {min_periods} shedding "
             f"periods of {period_frames:.1f} frames plus one; record longer or store fewer "
             "frames per period"

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from flownav.errors import ConfigError
+
 CS2 = 1.0 / 3.0
 
 
@@ -54,7 +56,7 @@ LATTICES = {name: _make(name) for name in ("D3Q19", "D3Q27")}
 
 def get_lattice(name: str) -> Lattice:
     if name not in LATTICES:
-        raise ValueError(f"unknown lattice {name!r}; choose one of {sorted(LATTICES)}")
+        raise ConfigError(f"unknown lattice {name!r}; choose one of {sorted(LATTICES)}")
     return LATTICES[name]
 
 

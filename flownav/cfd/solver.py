@@ -19,6 +19,7 @@ from torch import Tensor
 from flownav.cfd import boundaries, ckernel
 from flownav.cfd.collision import kbc
 from flownav.cfd.lattice import Lattice, equilibrium, get_lattice
+from flownav.errors import CheckpointError, ConfigError
 
 # Grid Reynolds number u/nu = Re / cells_per_d above which KBC on D3Q19 is no longer reliably
 # stable on this geometry (Re = 300 runs at 37.5 with 8 cells per diameter).
@@ -43,24 +44,34 @@ class SimConfig:
 
     def __post_init__(self):
         if not (self.re > 0 and math.isfinite(self.re)):
-            raise ValueError(f"Re must be a positive number, got {self.re}")
+            raise ConfigError(f"Re must be a positive number, got {self.re}")
+        sizes = {
+            "cells_per_d": self.cells_per_d,
+            "y_half": self.y_half,
+            "span": 1.0 if self.span is None else self.span,
+        }
+        for name, value in sizes.items():
+            if not (value > 0 and math.isfinite(value)):
+                raise ConfigError(f"{name} (--{name.replace('_', '-')}) must be a positive number, got {value}")
+        if not (0 <= self.sponge < self.x_range[1] - self.x_range[0]):
+            raise ConfigError(f"sponge must be >= 0 and shorter than the domain {self.x_range}, got {self.sponge}")
         if not 0 < self.u_lattice <= MAX_U_LATTICE:
-            raise ValueError(
+            raise ConfigError(
                 f"u_lattice = {self.u_lattice} is outside (0, {MAX_U_LATTICE}]: the lattice Mach "
                 "number would make the flow compressible; use u_lattice around 0.05-0.1"
             )
         if self.re / self.cells_per_d > MAX_GRID_RE:
-            raise ValueError(
+            raise ConfigError(
                 f"resolution too coarse to be stable: Re / cells_per_d = "
                 f"{self.re / self.cells_per_d:.1f} "
                 f"> {MAX_GRID_RE}; use cells_per_d >= {math.ceil(self.re / MAX_GRID_RE)}"
             )
         if self.cells_per_d < 4:
-            raise ValueError(f"cells_per_d = {self.cells_per_d} cannot resolve the cylinder; use >= 4")
+            raise ConfigError(f"cells_per_d = {self.cells_per_d} cannot resolve the cylinder; use >= 4")
         if self.tau - 0.5 < 1e-4:
-            raise ValueError(f"tau = {self.tau:.6f} too close to 1/2; raise cells_per_d or u_lattice")
+            raise ConfigError(f"tau = {self.tau:.6f} too close to 1/2; raise cells_per_d or u_lattice")
         if not (self.x_range[0] <= -2 and self.x_range[1] >= 4 and self.y_half >= 2):
-            raise ValueError(f"domain x {self.x_range}, |y| <= {self.y_half} too small around the cylinder")
+            raise ConfigError(f"domain x {self.x_range}, |y| <= {self.y_half} too small around the cylinder")
 
     @property
     def dx(self) -> float:
@@ -150,9 +161,9 @@ class CylinderLBM:
         if backend == "auto":
             backend = "c" if self.device.type == "cpu" and shutil.which("gcc") else "torch"
         if backend == "c" and self.device.type != "cpu":
-            raise ValueError("the C kernel runs on the CPU only; use backend='torch' on a GPU")
+            raise ConfigError("the C kernel runs on the CPU only; use backend='torch' on a GPU")
         if backend not in ("c", "torch"):
-            raise ValueError(f"unknown backend {backend!r}; use 'auto', 'c' or 'torch'")
+            raise ConfigError(f"unknown backend {backend!r}; use 'auto', 'c' or 'torch'")
         self.backend = backend
         self.lat: Lattice = get_lattice(cfg.lattice)
         self.grid = Grid(*cfg.shape)
@@ -207,7 +218,7 @@ class CylinderLBM:
 
     def load_state_dict(self, state: dict) -> None:
         if state["config"] != self.cfg.to_dict():
-            raise ValueError(
+            raise CheckpointError(
                 "checkpoint was written for another set-up "
                 f"({state['config']} != {self.cfg.to_dict()}); delete the checkpoint directory "
                 "or rerun with the options it was made with"

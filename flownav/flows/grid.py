@@ -33,7 +33,9 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from flownav import schema
 from flownav.atomic import atomic_write
+from flownav.errors import DataError
 from flownav.flows.base import Box, Cylinder, FlowField, obstacle_from_dict
 
 FORMAT = "flownav-grid-v1"
@@ -41,10 +43,10 @@ VELOCITY_FILE = "velocity.npy"
 META_FILE = "meta.json"
 TIME_MODES = ("looped", "clamped", "error")
 DEFAULT_UNITS = {"length": "cylinder diameter D", "velocity": "inflow speed U", "time": "D / U"}
+# A declared obstacle is solid: the stored speed inside it must stay below this fraction of the maximum.
+OBSTACLE_SPEED_TOL = 0.01
 
-
-class GridFlowError(ValueError):
-    """A grid-flow dataset or array is unusable; the message says how to fix it."""
+GridFlowError = DataError  # the name flownav.flows exports
 
 
 class GridFlow(FlowField):
@@ -83,6 +85,14 @@ class GridFlow(FlowField):
         n = self.shape[1:]
         grid_hi = tuple(o + (k - 1) * s for o, k, s in zip(self.origin, n, self.spacing, strict=True))
         self.bounds = bounds if bounds is not None else Box(self.origin, grid_hi)
+        for axis, name in enumerate("xyz"):
+            lo, hi, tol = self.origin[axis], grid_hi[axis], 1e-6 * self.spacing[axis]
+            if not self.periodic[axis] and (self.bounds.lo[axis] < lo - tol or self.bounds.hi[axis] > hi + tol):
+                raise GridFlowError(
+                    f"bounds in {name} [{self.bounds.lo[axis]:g}, {self.bounds.hi[axis]:g}] reach beyond the grid's "
+                    f"[{lo:g}, {hi:g}] on a non-periodic axis (the edge velocity would be held constant there): "
+                    f"shrink bounds to the grid, or check origin and spacing"
+                )
         self.obstacles = tuple(obstacles)
         self.meta = dict(meta or {})
         if max_speed is None:
@@ -241,12 +251,43 @@ def save_grid_flow(
 
 
 _REQUIRED = ("format", "shape", "origin", "spacing", "dt", "periodic", "bounds", "sha256")
+_XYZ = schema.Key(schema.FLOATS, size=3, required=True)
+META = {
+    "format": schema.Str(),
+    "shape": schema.Key(schema.INTS, ge=1),
+    "dtype": schema.Str(),
+    "origin": _XYZ,
+    "spacing": schema.Key(schema.FLOATS, size=3, gt=0),
+    "dt": schema.Float(gt=0),
+    "periodic": schema.Key(schema.BOOLS, size=3),
+    "bounds": {"lo": _XYZ, "hi": _XYZ},
+    "obstacles": schema.Key(schema.DICTS),
+    "max_speed": schema.Float(ge=0, null=True),
+    "sha256": {VELOCITY_FILE: schema.Str(required=True)},
+}
+
+
+def check_obstacles_are_solid(flow: GridFlow, where) -> None:
+    """The stored velocity at the grid nodes inside each declared obstacle is near zero (all frames)."""
+    n = flow.shape[1:]
+    x = [flow.origin[a] + flow.spacing[a] * torch.arange(n[a], dtype=torch.float64) for a in range(2)]
+    X, Y = torch.meshgrid(x[0], x[1], indexing="ij")
+    for ob in flow.obstacles:
+        inside = ob.contains(torch.stack((X, Y), -1))
+        if not inside.any():
+            continue
+        speed = float(flow._source[:, inside.to(flow.device)].float().norm(dim=-1).max())
+        if speed > OBSTACLE_SPEED_TOL * max(flow.max_speed, 1e-12):
+            raise GridFlowError(
+                f"{where}: the flow moves at up to {speed:.3g} inside the declared obstacle {ob.to_dict()} "
+                f"(max speed {flow.max_speed:.3g}); a shifted origin or wrong obstacles: fix origin/obstacles"
+            )
 
 
 def load_grid_flow(path: str | os.PathLike, device="cpu", dtype=torch.float32, verify: bool = True) -> GridFlow:
     """Load and validate a ``flownav-grid-v1`` dataset directory."""
     path = Path(path)
-    regen = "regenerate it with `python -m flownav.cfd generate` or point flow.path at a valid dataset"
+    regen = "regenerate it with `python -m flownav.cfd generate --out <dir>` or point flow.path at a valid dataset"
     if not path.is_dir():
         raise GridFlowError(f"no grid-flow dataset at {path}: {regen}")
     meta_path, vel_path = path / META_FILE, path / VELOCITY_FILE
@@ -257,9 +298,12 @@ def load_grid_flow(path: str | os.PathLike, device="cpu", dtype=torch.float32, v
         meta = json.loads(meta_path.read_text())
     except json.JSONDecodeError as e:
         raise GridFlowError(f"{meta_path} is not valid JSON ({e}): {regen}") from e
+    if not isinstance(meta, dict):
+        raise GridFlowError(f"{meta_path} must hold a JSON object of keys {list(META)}: {regen}")
     missing = [k for k in _REQUIRED if k not in meta]
     if missing:
         raise GridFlowError(f"{meta_path} lacks the keys {missing}: {regen}")
+    schema.check_group(meta, META, str(meta_path), error=GridFlowError, join=": ")
     if meta["format"] != FORMAT:
         raise GridFlowError(f"{meta_path} has format {meta['format']!r}, flownav reads {FORMAT!r}")
     if verify:
@@ -278,19 +322,29 @@ def load_grid_flow(path: str | os.PathLike, device="cpu", dtype=torch.float32, v
     tensor = torch.from_numpy(np.array(arr))  # a writable in-memory copy of the memory map
     check_velocity_array(tensor.shape, bool(torch.isfinite(tensor).all()))
     b = meta["bounds"]
-    return GridFlow(
-        tensor,
-        origin=meta["origin"],
-        spacing=meta["spacing"],
-        dt=meta["dt"],
-        periodic=meta["periodic"],
-        bounds=Box(tuple(b["lo"]), tuple(b["hi"])),
-        obstacles=[obstacle_from_dict(o) for o in meta.get("obstacles", [])],
-        max_speed=meta.get("max_speed"),
-        meta=meta,
-        dtype=dtype,
-        device=device,
-    )
+    try:
+        bounds = Box(tuple(b["lo"]), tuple(b["hi"]))
+        obstacles = [obstacle_from_dict(o) for o in meta.get("obstacles", [])]
+    except (ValueError, KeyError, TypeError) as e:
+        raise GridFlowError(f"{meta_path}: bounds or obstacles are malformed ({e}): {regen}") from e
+    try:
+        flow = GridFlow(
+            tensor,
+            origin=meta["origin"],
+            spacing=meta["spacing"],
+            dt=meta["dt"],
+            periodic=meta["periodic"],
+            bounds=bounds,
+            obstacles=obstacles,
+            max_speed=meta.get("max_speed"),
+            meta=meta,
+            dtype=dtype,
+            device=device,
+        )
+    except GridFlowError as e:
+        raise GridFlowError(f"{meta_path}: {e}") from e
+    check_obstacles_are_solid(flow, meta_path)
+    return flow
 
 
 def loop_seam_jump(velocity: np.ndarray) -> float:

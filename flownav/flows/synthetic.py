@@ -40,6 +40,9 @@ def synthetic_wake_grid(
     velocity[..., 1] = 0.3 * np.sin(x - t) + 0.1 * np.cos(z)
     velocity[..., 2] = 0.2 * np.cos(x + y - t)
     velocity *= f32(strength)
+    gx = np.linspace(lo[0], hi[0], nx)[:, None]
+    gy = np.linspace(lo[1], hi[1], ny)[None, :]
+    velocity[:, gx**2 + gy**2 < 0.25] = 0.0  # the declared cylinder is solid, as the loader checks
     return {
         "velocity": velocity,
         "origin": lo,
