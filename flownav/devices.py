@@ -1,7 +1,7 @@
 """The torch device of a run (``cfg.device``): checked once at start, and checked again once everything is built.
 
-    device = resolve_device(cfg.device)                     # ConfigError naming the fix if it is unusable
-    check_on_device(device, actor=actor, critic=critic, env=env)   # every parameter, buffer and the env
+device = resolve_device(cfg.device)                     # ConfigError naming the fix if it is unusable
+check_on_device(device, actor=actor, critic=critic, env=env)   # every parameter, buffer and the env
 """
 
 from __future__ import annotations

@@ -37,6 +37,7 @@ import os
 import time
 import warnings
 from collections.abc import Mapping
+from datetime import timedelta
 from pathlib import Path
 
 from flownav.atomic import atomic_write_text
@@ -244,7 +245,7 @@ def run_summary(
 ) -> str:
     """The lines that end a run: steps, wall time, each held-out success rate with its 95% Wilson interval
     (``held_out``: name -> (rate, episodes)), and where the checkpoints are."""
-    lines = ["== run summary ==", f"steps: {int(steps):,}", f"wall time: {wall_time_s / 60:.1f} min"]
+    lines = ["== run summary ==", f"steps: {int(steps):,}", f"wall time: {timedelta(seconds=round(wall_time_s))}"]
     for name, (rate, n) in held_out.items():
         if rate is None or n <= 0 or (isinstance(rate, float) and math.isnan(rate)):
             lines.append(f"{name}: not evaluated")

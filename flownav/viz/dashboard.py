@@ -1,7 +1,7 @@
 """The trajectory figure of a periodic evaluation during training (wandb / TensorBoard image, PNG in the run dir).
 
-    fig = eval_trajectories_figure(policy, obs_key, make_env, flow, episodes=4)
-    logger.log_figure(step, "eval/trajectories", fig)
+fig = eval_trajectories_figure(policy, obs_key, make_env, flow, episodes=4)
+logger.log_figure(step, "eval/trajectories", fig)
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ def eval_trajectories_figure(policy, obs_key: str, make_env, flow, episodes: int
     om, levels = symmetric_levels(om)
     fig, ax = plt.subplots(figsize=(6.4, 6.4 * (b.hi[1] - b.lo[1]) / (b.hi[0] - b.lo[0]) + 0.6))
     cs = ax.contourf(X, Y, om, levels=levels, cmap="RdBu_r", alpha=0.8)
-    fig.colorbar(cs, ax=ax, label="omega_z D / U", shrink=0.8)
+    fig.colorbar(cs, ax=ax, label="omega_z D / U", fraction=0.03, pad=0.02, format="%.2g")
     for ob in getattr(flow, "obstacles", ()):
         ax.add_patch(plt.Circle(ob.center, ob.radius, color="0.3"))
     outcomes = set()
