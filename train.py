@@ -5,6 +5,7 @@
     python train.py -m +experiment=teacher seed=0,1,2,3,4     # five seeds, local joblib launcher
     python train.py -m hydra/launcher=slurm +experiment=teacher seed=0,1,2,3,4   # on a SLURM cluster
     python train.py +experiment=teacher resume=outputs/teacher/<run>             # continue a run
+    python train.py +experiment=teacher hydra.run.dir=<run> resume=auto          # continue <run> if it has last.pt
     python train.py +experiment=teacher flow=vortex_street algo.total_frames=2e6 # analytic stand-in flow
 
 The run directory (Hydra's output dir) holds config.yaml, metrics.csv, checkpoints/ and final_metrics.json.
@@ -27,6 +28,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from flownav.algorithms import ALGORITHMS
 from flownav.builders import ConfigError
+from flownav.devices import resolve_device
+from flownav.resume import resolve_resume
 from flownav.runlog import WANDB_MODES
 
 
@@ -38,10 +41,7 @@ def validate(cfg: DictConfig) -> None:
         raise ConfigError(f"logger.wandb.mode is {cfg.logger.wandb.mode!r}; choose one of {list(WANDB_MODES)}")
     if cfg.threads is not None and int(cfg.threads) < 1:
         raise ConfigError(f"threads must be >= 1 or null, got {cfg.threads}")
-    try:
-        torch.device(cfg.device)
-    except RuntimeError as e:
-        raise ConfigError(f"device {cfg.device!r} is not a torch device ({e})") from e
+    resolve_device(cfg.device)
     if not isinstance(cfg.seed, int):
         raise ConfigError(f"seed must be an integer, got {cfg.seed!r}")
 
@@ -74,6 +74,7 @@ def resume_run_dir(resume) -> Path | None:
 def run(cfg: DictConfig, run_dir: str | Path) -> dict:
     validate(cfg)
     torch.set_num_threads(pick_threads(cfg))
+    cfg.resume = resolve_resume(cfg.resume, run_dir)  # resume=auto, and requeued cluster jobs: own last.pt
     if cfg.resume:
         run_dir = resume_run_dir(cfg.resume) or run_dir
     run_dir = Path(run_dir)
