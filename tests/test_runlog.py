@@ -111,3 +111,34 @@ def test_tensorboard_backend_writes_events(tmp_path):
     acc = EventAccumulator(str(events[0].parent)).Reload()
     assert [e.step for e in acc.Scalars("policy/entropy")] == [1024, 2048, 3072]
     assert [e.step for e in acc.Images("eval/trajectories")] == [3072]
+
+
+@pytest.mark.slow
+def test_wandb_offline_run_holds_rows_figure_and_checkpoint_artifact(tmp_path, monkeypatch):
+    """Through TorchRL's WandbLogger, offline: the trajectory figure is a wandb.Image in the run's media and
+    best.pt is a model artifact recorded in the run file (synced with `wandb sync`)."""
+    import matplotlib.pyplot as plt
+    from omegaconf import OmegaConf
+
+    from flownav.runlog import RunLogger
+
+    monkeypatch.delenv("WANDB_API_KEY", raising=False)
+    cfg = OmegaConf.create(
+        {"name": "dash", "seed": 3, "logger": {"progress": False, "wandb": {"mode": "offline", "group": "dash"}}}
+    )
+    logger = RunLogger(tmp_path, cfg)
+    logger.log(1024, {"train/success_rate": 0.5, "policy/entropy": 1.2})
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1])
+    logger.log_figure(1024, "eval/trajectories", fig)
+    (tmp_path / "checkpoints").mkdir()
+    (tmp_path / "checkpoints" / "best.pt").write_bytes(b"weights")
+    logger.log_checkpoint(tmp_path / "checkpoints" / "best.pt")
+    logger.close()
+    import wandb
+
+    wandb.teardown()  # wandb-core writes the run file asynchronously: wait for it
+    (run,) = (tmp_path / "wandb").glob("offline-run-*")
+    assert len(list((run / "files" / "media" / "images" / "eval").glob("trajectories_*.png"))) == 1
+    record = next(run.glob("run-*.wandb")).read_bytes()
+    assert b"dash-seed3-best" in record and b'{"file":"best.pt"}' in record  # the artifact and its metadata
