@@ -117,6 +117,7 @@ KNOWN_KEYS = {
     "threads",
     "device",
     "max_episodes",
+    "progress",
     "policies",
     "suite",
     "results",

@@ -142,3 +142,21 @@ def test_wandb_offline_run_holds_rows_figure_and_checkpoint_artifact(tmp_path, m
     assert len(list((run / "files" / "media" / "images" / "eval").glob("trajectories_*.png"))) == 1
     record = next(run.glob("run-*.wandb")).read_bytes()
     assert b"dash-seed3-best" in record and b'{"file":"best.pt"}' in record  # the artifact and its metadata
+
+
+def test_evaluation_progress_bar_counts_finished_episodes(capsys):
+    from flownav.envs import NavigationEnv, RegionTask
+    from flownav.evaluation.rollout import run_episodes
+    from flownav.evaluation.scripted import HeadToTarget
+    from flownav.flows import Box, UniformFlow
+
+    task = RegionTask(Box((5.0, 0.0, 5.0), (6.0, 1.0, 6.0)), Box((7.0, 0.0, 5.0), (8.0, 1.0, 6.0)))
+
+    def make_env(n, chunk):
+        return NavigationEnv(UniformFlow((0.0, 0.0, 0.0)), task, num_envs=n, views=("geo",), seed=chunk, time_limit=6.0)
+
+    run_episodes(HeadToTarget(), "geo", make_env, episodes=37, chunk_size=10, progress=True)
+    err = capsys.readouterr().err
+    assert "37/37" in err and "episode" in err
+    run_episodes(HeadToTarget(), "geo", make_env, episodes=5, chunk_size=10)  # off by default (inside training)
+    assert capsys.readouterr().err == ""

@@ -81,7 +81,7 @@ def run_episodes(
     parts: dict[str, list[Tensor]] = {k: [] for k in ("start", "target", "status", "time", "final_position")}
     traj: dict[str, Tensor] = {}
     done_so_far, chunk = 0, 0
-    bar = tqdm(total=episodes, unit="episode", disable=not progress, dynamic_ncols=True, leave=False)
+    bar = tqdm(total=episodes, unit="episode", disable=not progress, dynamic_ncols=True)
     while done_so_far < episodes:
         n = min(chunk_size, episodes - done_so_far)
         env = make_env(n, chunk)
