@@ -39,14 +39,7 @@ def read_runs(sweep_dir) -> list[dict]:
             seed = (yaml.safe_load(cfg_file.read_text()) or {}).get("seed") if cfg_file.is_file() else None
         final_file = job_dir / "final_metrics.json"
         final = json.loads(final_file.read_text()) if final_file.is_file() else None
-        runs.append(
-            {
-                "job": job_dir.name,
-                "seed": seed,
-                "config": " ".join(o for o in overrides if o.split("=", 1)[0] != "seed") or "(base)",
-                "final": final,
-            }
-        )
+        runs.append({"job": job_dir.name, "seed": seed, "overrides": overrides, "final": final})
     return runs
 
 
@@ -61,16 +54,20 @@ def _score(final: dict | None, metric: str | None) -> tuple[str | None, float | 
 
 
 def summarize_sweep(runs: list[dict], metric: str | None = None) -> dict:
-    """Per-job rows and, per configuration, n / mean / std (sample, n - 1) / best seed of the score."""
+    """Per-job rows and, per configuration, n / mean / std (sample, n - 1) / best seed of the score.
+
+    A configuration is a job's overrides other than ``seed`` and those shared by every job (``common``)."""
+    common = [o for o in (runs[0]["overrides"] if runs else []) if all(o in r["overrides"] for r in runs)]
     rows = []
     for r in runs:
+        config = " ".join(o for o in r["overrides"] if o not in common and o.split("=", 1)[0] != "seed")
         key, score = _score(r["final"], metric)
         final = r["final"] or {}
         rows.append(
             {
                 "job": r["job"],
                 "seed": r["seed"],
-                "config": r["config"],
+                "config": config or "(all)",
                 "score": score,
                 "score_key": key,
                 "steps": final.get("frames"),
@@ -91,7 +88,7 @@ def summarize_sweep(runs: list[dict], metric: str | None = None) -> dict:
             "best_job": best["job"] if best else None,
             "best_score": best["score"] if best else None,
         }
-    return {"metric": metric or " | ".join(SCORE_KEYS), "runs": rows, "configs": groups}
+    return {"metric": metric or " | ".join(SCORE_KEYS), "common": common, "runs": rows, "configs": groups}
 
 
 def _pct(x) -> str:
@@ -100,6 +97,8 @@ def _pct(x) -> str:
 
 def summary_markdown(summary: dict, title: str) -> str:
     lines = [f"# Sweep {title}", "", f"Score: held-out success ({summary['metric']}).", ""]
+    if summary["common"]:
+        lines += [f"Every job: `{' '.join(summary['common'])}`", ""]
     lines += ["| config | seeds | mean | std | best seed | best |", "| --- | --- | --- | --- | --- | --- |"]
     for config, g in summary["configs"].items():
         stats = f"{_pct(g['mean'])} | {_pct(g['std'])} | {g['best_seed']} | {_pct(g['best_score'])}"

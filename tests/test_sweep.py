@@ -54,17 +54,18 @@ def _fake_job(sweep, name, overrides, final):
 
 
 def test_summary_groups_configs_and_picks_the_best_seed(tmp_path):
-    _fake_job(tmp_path, "seed0_0", ["seed=0", "algo.lr=1e-3"], {"eval/success_rate": 0.80, "frames": 100})
-    _fake_job(tmp_path, "seed1_1", ["seed=1", "algo.lr=1e-3"], {"eval/success_rate": 0.90, "frames": 100})
-    _fake_job(tmp_path, "seed2_2", ["seed=2", "algo.lr=1e-3"], {"eval/success_rate": 0.70, "frames": 100})
-    _fake_job(tmp_path, "seed0_3", ["seed=0", "algo.lr=3e-4"], {"eval/student_success_rate": 0.5})
-    _fake_job(tmp_path, "seed1_4", ["seed=1", "algo.lr=3e-4"], None)  # failed job
+    common = ["+experiment=teacher"]
+    _fake_job(tmp_path, "seed0_0", [*common, "seed=0", "algo.lr=1e-3"], {"eval/success_rate": 0.80, "frames": 100})
+    _fake_job(tmp_path, "seed1_1", [*common, "seed=1", "algo.lr=1e-3"], {"eval/success_rate": 0.90, "frames": 100})
+    _fake_job(tmp_path, "seed2_2", [*common, "seed=2", "algo.lr=1e-3"], {"eval/success_rate": 0.70, "frames": 100})
+    _fake_job(tmp_path, "seed0_3", [*common, "seed=0", "algo.lr=3e-4"], {"eval/student_success_rate": 0.5})
+    _fake_job(tmp_path, "seed1_4", [*common, "seed=1", "algo.lr=3e-4"], None)  # failed job
     s = write_sweep_summary(tmp_path)
     fast, slow = s["configs"]["algo.lr=1e-3"], s["configs"]["algo.lr=3e-4"]
     assert fast["n"] == 3 and fast["mean"] == pytest.approx(0.8) and fast["std"] == pytest.approx(0.1)
     assert (fast["best_seed"], fast["best_job"], fast["best_score"]) == (1, "seed1_1", 0.9)
     assert slow == {"n": 1, "mean": 0.5, "std": None, "best_seed": 0, "best_job": "seed0_3", "best_score": 0.5}
-    assert [r["status"] for r in s["runs"]].count("done") == 4
+    assert [r["status"] for r in s["runs"]].count("done") == 4 and s["common"] == common
     assert json.loads((tmp_path / "sweep_summary.json").read_text()) == s
     md = (tmp_path / "sweep_summary.md").read_text()
     assert "| algo.lr=1e-3 | 3 | 80.00% | 10.00% | 1 | 90.00% |" in md
@@ -84,7 +85,7 @@ def test_multirun_writes_sweep_summary(tmp_path):
     assert group["n"] == 2 and group["mean"] == pytest.approx(statistics.fmean(scores))
     assert group["std"] == pytest.approx(statistics.stdev(scores))
     assert group["best_score"] == max(scores) and group["best_seed"] == scores.index(max(scores))
-    assert "| seed0_0 | 0 |" in (sweep / "sweep_summary.md").read_text()
+    assert "| seed0_0 | 0 | (all) |" in (sweep / "sweep_summary.md").read_text()
 
 
 def test_resume_auto_continues_the_run_directory_it_runs_in(tmp_path, monkeypatch):
