@@ -148,16 +148,19 @@ def check_config(cfg) -> None:
 
 
 # ----------------------------------------------------------------------------- evaluation
-def evaluate_policy(policy, make_env, obs_key: str, episodes: int, chunk: int = 10_000) -> dict:
+def evaluate_policy(policy, make_env, obs_key: str, episodes: int, chunk: int = 10_000, record: int = 0) -> dict:
     """Deterministic rollouts (:func:`flownav.evaluation.rollout.run_episodes`): exactly ``episodes``
-    episodes, one per env slot, no auto-reset. ``make_env(num_envs, chunk_index)`` builds a fresh env."""
-    ep = run_episodes(policy, obs_key, make_env, episodes, chunk)
+    episodes, one per env slot, no auto-reset. ``make_env(num_envs, chunk_index)`` builds a fresh env.
+    With ``record``, the first ``record`` episodes' trajectories are under ``"trajectories"``."""
+    ep = run_episodes(policy, obs_key, make_env, episodes, chunk, record=record)
     success = ep.success
     out = {"episodes": len(ep), "success_rate": float(success.float().mean())}
     out["mean_success_time"] = float(ep.time[success].mean()) if success.any() else None
     for s in Status:
         if s not in (Status.RUNNING, Status.SUCCESS):
             out[f"rate_{s.name.lower()}"] = float((ep.status == s).float().mean())
+    if record:
+        out["trajectories"] = ep.trajectories
     return out
 
 
@@ -306,10 +309,10 @@ def train(cfg, run_dir) -> dict:
                 cfg.env, flow, task, [obs_key], num_envs=n, seed=seed_base + seed + 7919 * chunk, device=device
             )
 
-        res = evaluate_policy(eval_policy.eval(), make_env, obs_key, episodes)
-        if figure_step is not None and figure_episodes:
-            fig = eval_trajectories_figure(eval_policy, obs_key, make_env, flow, figure_episodes)
-            logger.log_figure(figure_step, "eval/trajectories", fig)
+        record = figure_episodes if figure_step is not None else 0
+        res = evaluate_policy(eval_policy.eval(), make_env, obs_key, episodes, record=record)
+        if record:
+            logger.log_figure(figure_step, "eval/trajectories", eval_trajectories_figure(res.pop("trajectories"), flow))
         return res
 
     window = EpisodeWindow(num_envs, device)  # outcomes of the episodes that end between log rows

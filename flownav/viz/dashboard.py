@@ -1,7 +1,7 @@
 """The trajectory figure of a periodic evaluation during training (wandb / TensorBoard image, PNG in the run dir).
 
-fig = eval_trajectories_figure(policy, obs_key, make_env, flow, episodes=4)
-logger.log_figure(step, "eval/trajectories", fig)
+ep = run_episodes(policy, obs_key, make_env, episodes, record=4)   # the evaluation records a few episodes
+logger.log_figure(step, "eval/trajectories", eval_trajectories_figure(ep.trajectories, flow))
 """
 
 from __future__ import annotations
@@ -10,7 +10,6 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from flownav.envs.navigation import Status
-from flownav.evaluation.rollout import run_episodes
 from flownav.viz.fields import symmetric_levels, xy_slice
 
 STATUS_STYLE = {  # outcome -> line style, so failures stand out at a glance
@@ -21,11 +20,10 @@ STATUS_STYLE = {  # outcome -> line style, so failures stand out at a glance
 }
 
 
-def eval_trajectories_figure(policy, obs_key: str, make_env, flow, episodes: int = 4, title: str = ""):
-    """Top view (x-y) of ``episodes`` deterministic episodes of ``policy`` over the z-vorticity of the first
-    episode's start plane at its start time; start (dot) and target (star) of each, style by outcome."""
-    ep = run_episodes(policy, obs_key, make_env, episodes, chunk_size=episodes, record=episodes)
-    traj = ep.trajectories
+def eval_trajectories_figure(traj: dict, flow, title: str = ""):
+    """Top view (x-y) of recorded episodes (``run_episodes(..., record=k).trajectories``) over the z-vorticity
+    of the first episode's start plane at its start time; start (dot) and target (star) of each, style by outcome."""
+    episodes = traj["position"].shape[0]
     b = flow.bounds
     start = traj["position"][0, 0].numpy()
     X, Y, _, om = xy_slice(flow, float(start[2]), float(traj["t0"][0]), (b.lo[0], b.hi[0], b.lo[1], b.hi[1]), (120, 72))
@@ -36,7 +34,7 @@ def eval_trajectories_figure(policy, obs_key: str, make_env, flow, episodes: int
     for ob in getattr(flow, "obstacles", ()):
         ax.add_patch(plt.Circle(ob.center, ob.radius, color="0.3"))
     outcomes = set()
-    for i in range(traj["position"].shape[0]):
+    for i in range(episodes):
         path = traj["position"][i].numpy()[traj["alive"][i].numpy()]
         status = Status(int(traj["status"][i]))
         outcomes.add(status)
