@@ -9,6 +9,7 @@
     python train.py +experiment=teacher flow=vortex_street algo.total_frames=2e6 # analytic stand-in flow
 
 The run directory (Hydra's output dir) holds config.yaml, metrics.csv, checkpoints/ and final_metrics.json.
+A multirun's sweep directory also gets sweep_summary.json / .md (flownav/sweep.py, docs/ecosystem.md).
 ``train.py`` dispatches on ``algo.name`` to ``flownav.algorithms.<name>.train(cfg, run_dir)``.
 """
 
