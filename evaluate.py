@@ -49,7 +49,7 @@ def evaluate_checkpoint(cfg: DictConfig, log=print) -> dict:
         )
 
     t0 = time.time()
-    ep = run_episodes(policy, obs, make_env, int(cfg.episodes), int(cfg.chunk_size))
+    ep = run_episodes(policy, obs, make_env, int(cfg.episodes), int(cfg.chunk_size), progress=bool(cfg.progress))
     out = summarize(ep.status, ep.time)
     out.update(
         seconds=round(time.time() - t0, 2),
@@ -117,6 +117,7 @@ KNOWN_KEYS = {
     "threads",
     "device",
     "max_episodes",
+    "progress",
     "policies",
     "suite",
     "results",

@@ -5,9 +5,11 @@
     python train.py -m +experiment=teacher seed=0,1,2,3,4     # five seeds, local joblib launcher
     python train.py -m hydra/launcher=slurm +experiment=teacher seed=0,1,2,3,4   # on a SLURM cluster
     python train.py +experiment=teacher resume=outputs/teacher/<run>             # continue a run
+    python train.py +experiment=teacher hydra.run.dir=<run> resume=auto          # continue <run> if it has last.pt
     python train.py +experiment=teacher flow=vortex_street algo.total_frames=2e6 # analytic stand-in flow
 
 The run directory (Hydra's output dir) holds config.yaml, metrics.csv, checkpoints/ and final_metrics.json.
+A multirun's sweep directory also gets sweep_summary.json / .md (flownav/sweep.py, docs/ecosystem.md).
 ``train.py`` dispatches on ``algo.name`` to ``flownav.algorithms.<name>.train(cfg, run_dir)``.
 """
 
@@ -28,6 +30,7 @@ from omegaconf import DictConfig, OmegaConf
 from flownav import schema
 from flownav.algorithms import ALGORITHMS
 from flownav.errors import reported_as_one_line
+from flownav.resume import resolve_resume
 
 
 def validate(cfg: DictConfig) -> None:
@@ -63,6 +66,7 @@ def resume_run_dir(resume) -> Path | None:
 def run(cfg: DictConfig, run_dir: str | Path) -> dict:
     validate(cfg)
     torch.set_num_threads(pick_threads(cfg))
+    cfg.resume = resolve_resume(cfg.resume, run_dir)  # resume=auto, and requeued cluster jobs: own last.pt
     if cfg.resume:
         run_dir = resume_run_dir(cfg.resume) or run_dir
     run_dir = Path(run_dir)

@@ -1,8 +1,12 @@
-"""Run logging shared by every trainer: a CSV file always, wandb (offline unless asked), a tqdm bar.
+"""Run logging shared by every trainer: a CSV file always, wandb (offline unless asked) and TensorBoard
+through TorchRL's logger classes, a tqdm bar, and the end-of-run summary.
 
     logger = RunLogger(run_dir, cfg, total=cfg.algo.total_frames, start=step)
-    logger.log(step, {"train/success_rate": 0.4, ...})   # one CSV row, one wandb step, bar refresh
+    logger.log(step, {"train/success_rate": 0.4, ...})   # one CSV row, one row per backend, bar refresh
+    logger.log_figure(step, "eval/trajectories", fig)     # PNG under <run_dir>/figures, wandb.Image, TB image
+    logger.log_checkpoint(run_dir / "checkpoints" / "best.pt")   # a wandb model artifact
     logger.close()
+    logger.write_summary(run_summary(...))               # printed and appended to <run_dir>/train.log
 
 * ``metrics.csv`` in the run directory: one row per :meth:`log` call, columns ``step``, ``wall_time``
   (seconds since the run first started, carried over on resume), then the metric names. New metric
@@ -12,7 +16,16 @@
 * wandb: ``cfg.logger.wandb.mode`` is ``offline`` (default: files under ``<run_dir>/wandb``, sync later
   with ``wandb sync``), ``online`` (only if an API key is present, else offline with a warning) or
   ``disabled``.
+  Through :class:`torchrl.record.loggers.WandbLogger`: each metric group (``train/``, ``eval/``, ``loss/``)
+  is plotted against its own step key (``train/step`` = swimmer steps for PPO, iterations for DAgger).
+* TensorBoard (``cfg.logger.tensorboard: true``, e.g. ``logger=tensorboard``): events under
+  ``<run_dir>/tensorboard`` through :class:`torchrl.record.loggers.TensorboardLogger`
+  (``tensorboard --logdir outputs``).
+* Figures: always a PNG ``<run_dir>/figures/<name>_<step>.png``, and an image on each backend.
 * tqdm: steps of the environment, with the metrics named in ``cfg.logger.progress_keys``.
+
+TorchRL's ``CSVLogger`` writes one file per metric; the single ``metrics.csv`` table (with the resume rule
+above) is what the project's plots and tests read, so the CSV stays here.
 """
 
 from __future__ import annotations
@@ -24,9 +37,11 @@ import os
 import time
 import warnings
 from collections.abc import Mapping
+from datetime import timedelta
 from pathlib import Path
 
 from flownav.atomic import atomic_write_text
+from flownav.evaluation.metrics import wilson_interval
 
 WANDB_MODES = ("offline", "online", "disabled")
 
@@ -83,25 +98,35 @@ class RunLogger:
         self._fields: list[str] = []
         self._rows_from_disk(start)
 
-        self.wandb_run = None
+        # TorchRL loggers, each fed the same rows as the CSV.
+        self.wandb = None
+        self.backends = []
         mode = resolve_wandb_mode(str(_get(cfg, "logger.wandb.mode", "disabled")))
         if mode != "disabled":
             os.environ.setdefault("WANDB_SILENT", "true")
             if mode == "offline":
                 os.environ["WANDB_MODE"] = "offline"
-            import wandb
+            from torchrl.record.loggers import WandbLogger
 
-            self.wandb_run = wandb.init(
+            self.wandb = WandbLogger(
+                f"{_get(cfg, 'name', 'run')}-seed{_get(cfg, 'seed', 0)}",
+                offline=mode == "offline",
+                save_dir=str(self.run_dir),
+                id=self._wandb_id(),
                 project=str(_get(cfg, "logger.wandb.project", "flownav")),
                 entity=_get(cfg, "logger.wandb.entity"),
                 group=_get(cfg, "logger.wandb.group"),
-                name=f"{_get(cfg, 'name', 'run')}-seed{_get(cfg, 'seed', 0)}",
-                dir=str(self.run_dir),
                 config=_to_container(cfg),
                 mode=mode,
-                resume="allow",
-                id=self._wandb_id(),
+                log_env_packages=False,
             )
+            self.backends.append(self.wandb)
+        self.tensorboard = None
+        if _get(cfg, "logger.tensorboard", False):
+            from torchrl.record.loggers import TensorboardLogger
+
+            self.tensorboard = TensorboardLogger("tensorboard", log_dir=str(self.run_dir))
+            self.backends.append(self.tensorboard)
 
         self.bar = None
         if _get(cfg, "logger.progress", True):
@@ -154,8 +179,8 @@ class RunLogger:
             self._write_all(rows)
         with open(self.csv_path, "a", newline="") as f:
             csv.DictWriter(f, fieldnames=self._fields, extrasaction="ignore").writerow(row)
-        if self.wandb_run is not None:
-            self.wandb_run.log(dict(metrics), step=int(step))
+        for backend in self.backends:
+            backend.log_metrics({k: (math.nan if v is None else float(v)) for k, v in metrics.items()}, step=int(step))
         if self.bar is not None:
             self.bar.update(max(0, int(step) - self._last_step))
             shown = {k.split("/")[-1]: f"{row[k]:.3g}" for k in self.progress_keys if k in row}
@@ -167,15 +192,66 @@ class RunLogger:
     def elapsed(self) -> float:
         return time.time() - self.t0
 
+    def log_figure(self, step: int, name: str, fig) -> Path:
+        """Save a matplotlib figure as ``<run_dir>/figures/<name>_<step>.png`` and log it on every backend."""
+        import matplotlib.pyplot as plt
+
+        path = self.run_dir / "figures" / f"{name.replace('/', '_')}_{int(step)}.png"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=100)
+        if self.wandb is not None:
+            import wandb
+
+            self.wandb.log_metrics({name: wandb.Image(str(path))}, step=int(step))
+        if self.tensorboard is not None:
+            self.tensorboard.experiment.add_figure(name, fig, global_step=int(step), close=False)
+        plt.close(fig)
+        return path
+
+    def log_checkpoint(self, path, name: str | None = None) -> None:
+        """Log a checkpoint file as a wandb model artifact (synced with the run; no-op without wandb)."""
+        path = Path(path)
+        if self.wandb is None or not path.is_file():
+            return
+        import wandb
+
+        run = self.wandb.experiment
+        artifact = wandb.Artifact(name or f"{run.name}-{path.stem}", type="model", metadata={"file": path.name})
+        artifact.add_file(str(path))
+        run.log_artifact(artifact, aliases=["latest", path.stem])
+
     def summary(self, metrics: Mapping[str, float]) -> None:
-        if self.wandb_run is not None:
+        if self.wandb is not None:
             for k, v in metrics.items():
-                self.wandb_run.summary[k] = v
+                self.wandb.experiment.summary[k] = v
+
+    def write_summary(self, text: str) -> None:
+        """Print the end-of-run summary and append it to ``<run_dir>/train.log`` (Hydra's job log, if it is there)."""
+        print(text, flush=True)
+        with open(self.run_dir / "train.log", "a") as f:
+            f.write(text + "\n")
 
     def close(self) -> None:
         if self.bar is not None:
             self.bar.close()
             self.bar = None
-        if self.wandb_run is not None:
-            self.wandb_run.finish()
-            self.wandb_run = None
+        for backend in self.backends:
+            backend.shutdown()
+        self.backends, self.wandb, self.tensorboard = [], None, None
+
+
+def run_summary(
+    steps: int, wall_time_s: float, held_out: Mapping[str, tuple[float | None, int]], checkpoints: Mapping[str, Path]
+) -> str:
+    """The lines that end a run: steps, wall time, each held-out success rate with its 95% Wilson interval
+    (``held_out``: name -> (rate, episodes)), and where the checkpoints are."""
+    lines = ["== run summary ==", f"steps: {int(steps):,}", f"wall time: {timedelta(seconds=round(wall_time_s))}"]
+    for name, (rate, n) in held_out.items():
+        if rate is None or n <= 0 or (isinstance(rate, float) and math.isnan(rate)):
+            lines.append(f"{name}: not evaluated")
+            continue
+        lo, hi = wilson_interval(round(rate * n), n)
+        lines.append(f"{name}: {rate:.2%} of {n} held-out episodes (95% CI {lo:.2%} - {hi:.2%})")
+    for name, path in checkpoints.items():
+        lines.append(f"{name}: {path}")
+    return "\n".join(lines)

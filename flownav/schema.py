@@ -120,17 +120,9 @@ def _is_list(v) -> bool:
 
 
 def _device_problem(v) -> str | None:
-    import torch
+    from flownav.devices import device_problem
 
-    try:
-        device = torch.device(v)
-    except (RuntimeError, TypeError):
-        return "is not a torch device (cpu, cuda, cuda:0)"
-    if device.type == "cuda" and not torch.cuda.is_available():
-        return "asks for CUDA but torch sees no CUDA device here; use device=cpu"
-    if device.type not in ("cpu", "cuda"):
-        return "is not supported; use device=cpu or device=cuda"
-    return None
+    return device_problem(v)
 
 
 def check_value(path: str, key: Key, v, error=ConfigError) -> None:
@@ -257,6 +249,8 @@ TASKS = {
 LOGGER = {
     "progress": Bool(),
     "progress_keys": Key(STRS),
+    "figure_episodes": Int(ge=0),
+    "tensorboard": Bool(),
     "wandb": {
         "mode": Str(choices=("offline", "online", "disabled")),
         "project": Str(),

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import time
 from pathlib import Path
 
@@ -48,9 +47,11 @@ from flownav.checkpoint import (
     safe_torch_load,
     save_policy_checkpoint,
 )
-from flownav.envs.navigation import Status
+from flownav.devices import check_on_device, resolve_device
 from flownav.envs.observations import GEO_VIEWS, observation_size
+from flownav.episode_window import EpisodeWindow
 from flownav.paths import resolve
+from flownav.runlog import RunLogger, run_summary
 
 STUDENT_VIEWS = ("ego", "ego_flow", "ego_up", "ego_mem", "geo", "geo_flow")
 
@@ -99,8 +100,7 @@ def collect(env, student, teacher, student_view, teacher_view, steps, beta, gen)
     """Run ``steps`` steps from fresh episodes; return the labelled states and episode statistics."""
     td = env.reset()
     obs, labels = [], []
-    ended = succeeded = 0
-    success_time = 0.0
+    window = EpisodeWindow(env.batch_size[0], env.device)
     for _ in range(steps):
         s_obs = td[student_view]
         a_student = student(s_obs)
@@ -108,24 +108,15 @@ def collect(env, student, teacher, student_view, teacher_view, steps, beta, gen)
         obs.append(s_obs)
         labels.append(a_teacher)
         if beta > 0:
-            use_teacher = torch.rand(a_student.shape[0], 1, generator=gen) < beta
+            use_teacher = (torch.rand(a_student.shape[0], 1, generator=gen) < beta).to(a_student.device)
             td["action"] = torch.where(use_teacher, a_teacher, a_student)
         else:
             td["action"] = a_student
         out, td = env.step_and_maybe_reset(td)
-        done = out["next", "done"].reshape(-1)
-        if done.any():
-            status = out["next", "status"].reshape(-1)[done]
-            win = status == Status.SUCCESS
-            ended += int(done.sum())
-            succeeded += int(win.sum())
-            success_time += float(out["next", "time"].reshape(-1)[done][win].sum())
+        window.add(out["next"])
     data = TensorDict({"obs": torch.cat(obs), "teacher_action": torch.cat(labels)}, batch_size=[len(obs) * len(obs[0])])
-    stats = {
-        "episodes": ended,
-        "success_rate": succeeded / ended if ended else math.nan,
-        "mean_success_time": success_time / succeeded if succeeded else math.nan,
-    }
+    # episodes, success_rate, mean_success_time, episode_length, rate_<failure cause>, episode_reward
+    stats = {k.removeprefix("train/").replace("success_time", "mean_success_time"): v for k, v in window.pop().items()}
     return data, stats
 
 
@@ -140,7 +131,7 @@ def train(cfg, run_dir) -> dict:
     updates, batch_size = int(a.updates_per_iteration), int(a.batch_size)
     checkpoint_every = int(cfg.checkpoint_every) if cfg.get("checkpoint_every") else 0
     role = str(cfg.get("role") or "student")
-    device = str(cfg.device)
+    device = resolve_device(cfg.device)
     torch.manual_seed(seed)
 
     # The teacher reads the view its checkpoint records, unless algo.teacher_view pins one (then they must match).
@@ -195,8 +186,7 @@ def train(cfg, run_dir) -> dict:
         env.rng.set_state(st["rng"]["env"])
         gen.set_state(st["rng"]["beta"])
 
-    from flownav.runlog import RunLogger
-
+    check_on_device(device, student=student, teacher=teacher, env=env)
     logger = RunLogger(run_dir, cfg, total=iterations, start=iteration, wall_offset=wall_offset)
 
     def save(name: str, metrics: dict) -> Path:
@@ -252,9 +242,7 @@ def train(cfg, run_dir) -> dict:
             "iteration": iteration,
             "train/loss": total / updates,
             "train/loss_onpolicy": loss_onpolicy,
-            "train/success_rate": ep["success_rate"],
-            "train/mean_success_time": ep["mean_success_time"],
-            "train/episodes": ep["episodes"],
+            **{f"train/{k}": v for k, v in ep.items()},
             "train/beta": beta,
             "buffer/size": len(buffer),
             "perf/collect_s": t_collect,
@@ -285,6 +273,7 @@ def train(cfg, run_dir) -> dict:
             final[f"eval/{name}_mean_success_time"] = s["mean_success_time"]
         logger.log(iteration, {k: v for k, v in final.items() if k.startswith("eval/") and v is not None})
     logger.summary(final)
+    logger.log_checkpoint(ckpt_dir / "last.pt")
     logger.close()
     if a.get("results_json"):
         path = resolve(str(a.results_json))
@@ -303,4 +292,10 @@ def train(cfg, run_dir) -> dict:
     if cfg.get("output_checkpoint"):
         out = atomic_copy(ckpt_dir / "last.pt", resolve(str(cfg.output_checkpoint)))
         final["output_checkpoint"] = str(out)
+    held_out = {
+        f"held-out {name} success": (final.get(f"eval/{name}_success_rate"), eval_episodes)
+        for name in ("student", "teacher")
+    }
+    ckpts = {"last": ckpt_dir / "last.pt", "copied to": final.get("output_checkpoint")}
+    logger.write_summary(run_summary(frames, logger.elapsed, held_out, {k: v for k, v in ckpts.items() if v}))
     return final

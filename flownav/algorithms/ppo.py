@@ -35,11 +35,14 @@ from flownav.agents.networks import DeterministicPolicy, ObsNormalizer, check_ml
 from flownav.atomic import atomic_copy
 from flownav.builders import ConfigError, build_env, build_flow, build_task
 from flownav.checkpoint import load_checkpoint, load_resume_checkpoint, save_policy_checkpoint
+from flownav.devices import check_on_device, resolve_device
 from flownav.envs.navigation import NavigationEnv, Status
 from flownav.envs.observations import GEO_VIEWS, observation_size
+from flownav.episode_window import EpisodeWindow
 from flownav.evaluation.rollout import run_episodes
 from flownav.paths import resolve
-from flownav.runlog import RunLogger
+from flownav.runlog import RunLogger, run_summary
+from flownav.viz.dashboard import eval_trajectories_figure
 
 LOSS_CRITIC_TYPES = ("l1", "l2", "smooth_l1")
 
@@ -121,16 +124,19 @@ def check_config(cfg) -> None:
 
 
 # ----------------------------------------------------------------------------- evaluation
-def evaluate_policy(policy, make_env, obs_key: str, episodes: int, chunk: int = 10_000) -> dict:
+def evaluate_policy(policy, make_env, obs_key: str, episodes: int, chunk: int = 10_000, record: int = 0) -> dict:
     """Deterministic rollouts (:func:`flownav.evaluation.rollout.run_episodes`): exactly ``episodes``
-    episodes, one per env slot, no auto-reset. ``make_env(num_envs, chunk_index)`` builds a fresh env."""
-    ep = run_episodes(policy, obs_key, make_env, episodes, chunk)
+    episodes, one per env slot, no auto-reset. ``make_env(num_envs, chunk_index)`` builds a fresh env.
+    With ``record``, the first ``record`` episodes' trajectories are under ``"trajectories"``."""
+    ep = run_episodes(policy, obs_key, make_env, episodes, chunk, record=record)
     success = ep.success
     out = {"episodes": len(ep), "success_rate": float(success.float().mean())}
     out["mean_success_time"] = float(ep.time[success].mean()) if success.any() else None
     for s in Status:
         if s not in (Status.RUNNING, Status.SUCCESS):
             out[f"rate_{s.name.lower()}"] = float((ep.status == s).float().mean())
+    if record:
+        out["trajectories"] = ep.trajectories
     return out
 
 
@@ -184,7 +190,9 @@ def train(cfg, run_dir) -> dict:
     target_success = float(a.target_success)
     eval_episodes = int(a.final_eval_episodes)
     eval_every, periodic_eval_episodes = int(a.get("eval_every") or 0), int(a.get("eval_episodes") or 0)
+    figure_episodes = int(cfg.logger.get("figure_episodes") or 0)  # drawn at each periodic evaluation
 
+    device = resolve_device(cfg.device)
     torch.manual_seed(seed)
     flow = build_flow(cfg.flow, device=cfg.device)
     task = build_task(cfg.task, flow)
@@ -192,6 +200,7 @@ def train(cfg, run_dir) -> dict:
     env = build_env(cfg.env, flow, task, views, num_envs=num_envs, seed=seed, device=cfg.device)
     low, high = env.action_spec.space.low[0].clone(), env.action_spec.space.high[0].clone()
     policy, actor, critic_net, critic = make_actor_critic(obs_key, critic_key, low, high, a.actor, a.critic)
+    actor, critic = actor.to(device), critic.to(device)  # policy and critic_net are inside them
 
     adv_module = GAE(gamma=float(a.gamma), lmbda=float(a.lmbda), value_network=critic, average_gae=False)
     loss_module = ClipPPOLoss(
@@ -206,7 +215,7 @@ def train(cfg, run_dir) -> dict:
     )
     optim = torch.optim.Adam(loss_module.parameters(), lr=lr, eps=1e-5)
     buffer = ReplayBuffer(
-        storage=LazyTensorStorage(frames_per_batch),
+        storage=LazyTensorStorage(frames_per_batch, device=device),
         sampler=SamplerWithoutReplacement(),
         batch_size=minibatch_size,
     )
@@ -243,6 +252,7 @@ def train(cfg, run_dir) -> dict:
     )
     if collector.policy is not actor:  # a copy would only see weights, not the normaliser buffers
         raise RuntimeError("the collector copied the actor; PPO needs it to step the live policy")
+    check_on_device(device, actor=actor, critic=critic, env=env)
     logger = RunLogger(run_dir, cfg, total=total_frames, start=frames, wall_offset=wall_offset)
 
     def save(name: str, metrics: dict) -> Path:
@@ -264,19 +274,24 @@ def train(cfg, run_dir) -> dict:
         }
         return save_policy_checkpoint(ckpt_dir / name, policy, obs_key, role, meta=meta, train_state=train_state)
 
-    def evaluate(episodes: int, seed_base: int) -> dict:
-        """Deterministic episodes of a copy of the current policy (its mean action), on fresh envs."""
-        eval_policy = DeterministicPolicy(**policy.config)
+    def evaluate(episodes: int, seed_base: int, figure_step: int | None = None) -> dict:
+        """Deterministic episodes of a copy of the current policy (its mean action), on fresh envs;
+        with ``figure_step``, also a figure of a few of its trajectories for the dashboards."""
+        eval_policy = DeterministicPolicy(**policy.config).to(device)
         eval_policy.load_state_dict(policy.state_dict())
 
         def make_env(n, chunk):
-            return build_env(cfg.env, flow, task, [obs_key], num_envs=n, seed=seed_base + seed + 7919 * chunk)
+            return build_env(
+                cfg.env, flow, task, [obs_key], num_envs=n, seed=seed_base + seed + 7919 * chunk, device=device
+            )
 
-        return evaluate_policy(eval_policy.eval(), make_env, obs_key, episodes)
+        record = figure_episodes if figure_step is not None else 0
+        res = evaluate_policy(eval_policy.eval(), make_env, obs_key, episodes, record=record)
+        if record:
+            logger.log_figure(figure_step, "eval/trajectories", eval_trajectories_figure(res.pop("trajectories"), flow))
+        return res
 
-    # Per-slot running episode returns (an episode spans batches).
-    ep_return = torch.zeros(num_envs)
-    window_returns, window_success, window_times = [], [], []
+    window = EpisodeWindow(num_envs, device)  # outcomes of the episodes that end between log rows
     t_start, frames_at_start = time.time(), frames
     time_to_target = None
     metrics: dict = {}
@@ -289,20 +304,7 @@ def train(cfg, run_dir) -> dict:
             frames += data.numel()
             iteration += 1
 
-            # ---- episode statistics from this batch
-            nxt = data["next"]
-            rew = nxt["reward"].reshape(num_envs, rollout_steps)
-            done = nxt["done"].reshape(num_envs, rollout_steps)
-            status = nxt["status"].reshape(num_envs, rollout_steps)
-            etime = nxt["time"].reshape(num_envs, rollout_steps)
-            for t in range(rollout_steps):
-                ep_return += rew[:, t]
-                d = done[:, t]
-                if d.any():
-                    window_returns.append(ep_return[d].clone())
-                    window_success.append(status[d, t] == Status.SUCCESS)
-                    window_times.append(etime[d, t][status[d, t] == Status.SUCCESS])
-                    ep_return = torch.where(d, 0.0, ep_return)
+            window.add(data["next"])  # episode statistics from this batch
 
             # ---- PPO update
             if anneal_lr:
@@ -332,6 +334,7 @@ def train(cfg, run_dir) -> dict:
                                 loss["kl_approx"],
                                 loss["clip_fraction"],
                                 loss["explained_variance"].reshape(()),
+                                loss.get("entropy", torch.full((), float("nan"), device=device)),
                             ]
                         ).detach()
                     )
@@ -344,15 +347,11 @@ def train(cfg, run_dir) -> dict:
 
             # ---- logging
             if iteration % log_every == 0 or frames >= total_frames:
-                n_eps = sum(len(r) for r in window_returns)
-                succ = torch.cat(window_success).float().mean().item() if n_eps else float("nan")
-                stimes = torch.cat(window_times) if n_eps else torch.empty(0)
+                episodes = window.pop()
+                n_eps, succ = episodes["train/episodes"], episodes["train/success_rate"]
                 lm = torch.stack(losses).mean(0)
                 metrics = {
-                    "train/episode_reward": torch.cat(window_returns).mean().item() if n_eps else float("nan"),
-                    "train/success_rate": succ,
-                    "train/success_time": stimes.mean().item() if stimes.numel() else float("nan"),
-                    "train/episodes": n_eps,
+                    **episodes,
                     "loss/objective": lm[0].item(),
                     "loss/critic": lm[1].item(),
                     "loss/grad_norm": lm[2].item(),
@@ -360,18 +359,18 @@ def train(cfg, run_dir) -> dict:
                     "loss/clip_fraction": lm[4].item(),
                     "loss/explained_variance": lm[5].item(),
                     "policy/scale": data["scale"].mean().item(),
+                    "policy/entropy": lm[6].item(),
                     "perf/steps_per_s": (frames - frames_at_start) / max(time.time() - t_start, 1e-9),
                     "perf/collect_s": t_collect,
                     "perf/train_s": t_train,
                     "lr": optim.param_groups[0]["lr"],
                 }
-                window_returns, window_success, window_times = [], [], []
                 # The success that counts: deterministic held-out episodes when periodic evaluation is on,
                 # else the training episodes of the stochastic policy.
                 score = succ if n_eps else float("nan")
                 if eval_every and periodic_eval_episodes and (iteration % eval_every == 0 or frames >= total_frames):
                     t_eval = time.time()
-                    res = evaluate(periodic_eval_episodes, 20_000_003)
+                    res = evaluate(periodic_eval_episodes, 20_000_003, figure_step=frames)
                     score = res["success_rate"]
                     metrics["eval/success_rate"] = score
                     metrics["eval/mean_success_time"] = res["mean_success_time"] or float("nan")
@@ -407,8 +406,14 @@ def train(cfg, run_dir) -> dict:
         final.update({f"eval/{k}": v for k, v in res.items()})
         logger.log(frames, {f"eval/{k}": v for k, v in res.items() if isinstance(v, int | float)})
     logger.summary(final)
+    logger.log_checkpoint(ckpt_dir / "best.pt")
     logger.close()
     if cfg.get("output_checkpoint"):
         out = atomic_copy(ckpt_dir / "last.pt", resolve(str(cfg.output_checkpoint)))
         final["output_checkpoint"] = str(out)
+    # End-of-run summary: the final evaluation's success, else the last periodic evaluation's.
+    n_held_out = int(final.get("eval/episodes") or (periodic_eval_episodes if "eval/success_rate" in final else 0))
+    held_out = {"held-out success": (final.get("eval/success_rate"), n_held_out)}
+    ckpts = {"last": ckpt_dir / "last.pt", "best": ckpt_dir / "best.pt", "copied to": final.get("output_checkpoint")}
+    logger.write_summary(run_summary(frames, logger.elapsed, held_out, {k: v for k, v in ckpts.items() if v}))
     return final

@@ -60,6 +60,7 @@ class Suite:
         self.seed = int(cfg.get("seed", 0))
         self.chunk_size = int(cfg.get("chunk_size", 10_000))
         self.max_episodes = cfg.get("max_episodes")
+        self.progress = bool(cfg.get("progress", False))  # a bar over each experiment's episodes
         self.figures_dir = Path(figures_dir or resolve(cfg.get("figures_dir", "results/figures")))
         self.log = log
         self._flows: dict[str, object] = {}
@@ -123,7 +124,9 @@ class Suite:
     def rollout(self, name: str, flow, task_cfg, env_cfg, episodes: int, seed: int | None = None, record: int = 0):
         policy, obs, _ = self.policy(name)
         make_env = self.make_env_factory(flow, task_cfg, env_cfg, [obs], self.seed if seed is None else seed)
-        return run_episodes(policy, obs, make_env, self.episodes(episodes), self.chunk_size, record=record)
+        return run_episodes(
+            policy, obs, make_env, self.episodes(episodes), self.chunk_size, record=record, progress=self.progress
+        )
 
     def env_cfg(self, spec) -> DictConfig:
         return OmegaConf.merge(self.cfg.env, spec.get("env") or {})

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import torch
 from torch import Tensor
+from tqdm.auto import tqdm
 
 from flownav.envs.navigation import NavigationEnv, Status
 
@@ -58,6 +59,7 @@ def run_episodes(
     chunk_size: int = 10_000,
     record: int = 0,
     max_steps: int | None = None,
+    progress: bool = False,
 ) -> Episodes:
     """Run exactly ``episodes`` deterministic episodes of ``policy`` (obs -> action).
 
@@ -71,6 +73,7 @@ def run_episodes(
             ``time`` [T+1], ``alive`` [k, T+1] (False after the episode ended; the last True row is the
             final state), and the per-step ``action`` [k, T, 3].
         max_steps: safety bound on steps per chunk (default: time_limit / dt + 2).
+        progress: show a tqdm bar of finished episodes (off inside training, where the run's bar is shown).
     """
     if episodes < 1 or chunk_size < 1:
         raise ValueError(f"need episodes >= 1 and chunk_size >= 1, got {episodes}, {chunk_size}")
@@ -78,6 +81,7 @@ def run_episodes(
     parts: dict[str, list[Tensor]] = {k: [] for k in ("start", "target", "status", "time", "final_position")}
     traj: dict[str, Tensor] = {}
     done_so_far, chunk = 0, 0
+    bar = tqdm(total=episodes, unit="episode", disable=not progress, dynamic_ncols=True)
     while done_so_far < episodes:
         n = min(chunk_size, episodes - done_so_far)
         env = make_env(n, chunk)
@@ -124,6 +128,7 @@ def run_episodes(
                 final = torch.where(new[:, None], td["position"].cpu(), final)
             alive_before = running
             running = running & ~done
+            bar.update(int(new.sum()))
             if k:
                 rec["action"].append(action[:k].cpu().clone())
                 _record(rec, td, alive_before, k)
@@ -138,6 +143,7 @@ def run_episodes(
             traj["status"] = status[:k]
         done_so_far += n
         chunk += 1
+    bar.close()
     cat = {key: torch.cat(v) for key, v in parts.items()}
     return Episodes(trajectories=traj, **cat)
 

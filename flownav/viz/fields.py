@@ -17,7 +17,9 @@ def xy_slice(flow: FlowField, z: float, t: float, extent, n: tuple[int, int] = (
     xs, ys = torch.linspace(x0, x1, n[0]), torch.linspace(y0, y1, n[1])
     X, Y = torch.meshgrid(xs, ys, indexing="xy")
     pos = torch.stack((X, Y, torch.full_like(X, z)), -1).reshape(-1, 3)
-    v = flow.velocity(pos, torch.full((pos.shape[0],), float(t))).reshape(n[1], n[0], 3)
+    device = getattr(flow, "device", pos.device)  # a grid flow may live on the GPU
+    pos = pos.to(device)
+    v = flow.velocity(pos, torch.full((pos.shape[0],), float(t), device=device)).cpu().reshape(n[1], n[0], 3)
     speed = v.norm(dim=-1)
     dvdx = torch.gradient(v[..., 1], spacing=(xs[1] - xs[0]).item(), dim=1)[0]
     dudy = torch.gradient(v[..., 0], spacing=(ys[1] - ys[0]).item(), dim=0)[0]

@@ -1,0 +1,106 @@
+"""Device-clean training: cfg.device is checked once with a one-line error, every parameter, buffer and env
+of PPO and DAgger lives on it, and a tiny training runs on CUDA when there is one."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+
+from flownav.builders import ConfigError
+from flownav.devices import check_on_device, resolve_device
+
+CONF = str(Path(__file__).resolve().parents[1] / "conf")
+TINY = [
+    "+experiment=teacher",
+    "flow=uniform",
+    "flow.velocity=[0.0,0.0,0.0]",
+    "task.start=[[5.0,0.0,5.0],[6.0,1.0,6.0]]",
+    "task.target=[[7.0,0.0,5.0],[8.0,1.0,6.0]]",
+    "env.num_envs=32",
+    "env.dt=0.5",
+    "env.time_limit=4.0",
+    "algo.rollout_steps=8",
+    "algo.epochs=1",
+    "algo.minibatch_size=128",
+    "algo.total_frames=512",
+    "algo.eval_every=2",
+    "algo.eval_episodes=8",
+    "algo.final_eval_episodes=16",
+    "algo.actor.hidden=[8]",
+    "algo.critic.hidden=[8]",
+    "logger=csv",
+    "logger.progress=false",
+    "logger.figure_episodes=2",
+    "threads=1",
+]
+
+
+def make_cfg(*overrides):
+    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
+        return compose("config", overrides=[*TINY, *overrides])
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA")
+def test_cuda_without_cuda_is_one_clear_line():
+    with pytest.raises(ConfigError) as e:
+        resolve_device("cuda")
+    expected = "device=cuda asks for CUDA but torch sees no CUDA device here; use device=cpu"
+    assert str(e.value) == expected
+    from train import validate
+
+    with pytest.raises(ConfigError) as e:
+        validate(make_cfg("device=cuda"))
+    assert str(e.value) == expected
+
+
+def test_bad_device_name_names_the_key():
+    with pytest.raises(ConfigError, match="device=gpu is not a torch device"):
+        resolve_device("gpu")
+    assert resolve_device("cpu") == torch.device("cpu")
+
+
+def test_check_on_device_names_the_stray_tensor():
+    net = torch.nn.Sequential(torch.nn.Linear(2, 2))
+    net.register_buffer("stats", torch.zeros(2, device="meta"))
+    check_on_device("meta", w=torch.zeros(1, device="meta"))
+    with pytest.raises(RuntimeError, match=r"^policy\.stats is on meta, the run's device is cpu \(cfg\.device\)$"):
+        check_on_device("cpu", policy=net)
+
+
+def test_ppo_puts_networks_buffer_returns_and_eval_envs_on_cfg_device(monkeypatch, tmp_path):
+    """Everything PPO builds (checked by the trainer itself) and every env it builds, evaluation included,
+    is on cfg.device."""
+    from flownav.algorithms import ppo
+
+    built = []
+    real_build_env = ppo.build_env
+
+    def recording_build_env(*args, **kwargs):
+        env = real_build_env(*args, **kwargs)
+        built.append(env)
+        return env
+
+    monkeypatch.setattr(ppo, "build_env", recording_build_env)
+    checked = []
+    monkeypatch.setattr(ppo, "check_on_device", lambda device, **things: checked.append((device, things)))
+    from train import run
+
+    run(make_cfg(), tmp_path)
+    assert len(built) >= 3  # training env, periodic evaluation (+ figure), final evaluation
+    assert {str(env.device) for env in built} == {"cpu"}
+    ((device, things),) = checked
+    assert set(things) == {"actor", "critic", "env"}
+    check_on_device(device, **things)  # the real check passes on what PPO built
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_tiny_ppo_trains_on_cuda(tmp_path):
+    from flownav.checkpoint import load_checkpoint
+    from train import run
+
+    final = run(make_cfg("device=cuda"), tmp_path)
+    assert final["frames"] == 512 and 0.0 <= final["eval/success_rate"] <= 1.0
+    assert load_checkpoint(tmp_path / "checkpoints" / "last.pt")["obs"] == "geo_sincos"
