@@ -183,7 +183,8 @@ class FlowNavVectorEnv(VectorEnv):
             self._root = nav.reset()
         else:
             mask = torch.as_tensor(np.asarray(mask, dtype=bool), device=nav.device).reshape(self.num_envs, 1)
-            self._root = nav.reset(TensorDict({"_reset": mask}, batch_size=nav.batch_size, device=nav.device))
+            # TorchRL's partial reset: the last root carries the kept swimmers' entries, "_reset" says who restarts.
+            self._root = nav.reset(self._root.set("_reset", mask))
         return self.swimmers.observation(self._root), self._vector_info(self._root)
 
     def step(self, actions):
