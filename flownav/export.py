@@ -24,7 +24,7 @@ from flownav.atomic import atomic_write, atomic_write_text
 from flownav.checkpoint import CheckpointError, load_policy
 from flownav.envs.observations import HISTORY_LEN, HISTORY_STRIDE
 from flownav.evaluation.experiments import file_digest
-from flownav.paths import RESULTS_DIR, resolve
+from flownav.paths import REPO_ROOT, RESULTS_DIR, resolve
 
 FORMATS = {"onnx": ".onnx", "torchscript": ".pt"}
 ARGUMENTS = ("checkpoint", "format", "out")
@@ -178,7 +178,9 @@ def make_card(checkpoint: Path, payload: dict, policy, fmt: str, out: Path) -> d
         },
         "units": flow_units(flow_cfg),
         "policy": {
-            "checkpoint": str(checkpoint),
+            "checkpoint": str(
+                checkpoint.relative_to(REPO_ROOT) if checkpoint.is_relative_to(REPO_ROOT) else checkpoint
+            ),
             "checkpoint_sha256": file_digest(checkpoint),
             "role": payload.get("role"),
             "hidden": cfg["hidden"],
@@ -229,7 +231,7 @@ def export_policy(checkpoint, fmt: str = "onnx", out=None) -> tuple[Path, Path]:
     """Write the exported policy and its card; returns (model path, card path)."""
     if fmt not in FORMATS:
         raise ExportError(f"format={fmt}: choose one of {', '.join(FORMATS)}")
-    checkpoint = Path(checkpoint)
+    checkpoint = resolve(checkpoint)  # like evaluate.py: relative to the repository when not found here
     policy, payload = load_policy(checkpoint)
     out = Path(out) if out else Path("exports") / f"{checkpoint.stem}{FORMATS[fmt]}"
     card_path = out.with_name(out.name + ".json")
