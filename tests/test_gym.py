@@ -231,3 +231,15 @@ def test_sb3_ppo_learns_still_water():
     trained_return, trained_success = evaluate(lambda o: model.predict(o, deterministic=True)[0])
     assert random_success == 0.0 and random_return < -5  # random turning never reaches the target in 20 time units
     assert trained_return > random_return + 5 and trained_success > 0
+
+
+@pytest.mark.slow
+def test_readme_snippet_runs(monkeypatch):
+    from test_readme import readme_python_blocks
+
+    (block,) = [b for b in readme_python_blocks() if "flownav/CylinderWake-v0" in b]
+    monkeypatch.chdir(REPO_ROOT)
+    namespace: dict = {}
+    exec(compile(block, "README.md", "exec"), namespace)  # noqa: S102 - our own README
+    assert namespace["model"].num_timesteps == 2048
+    assert namespace["vec"].observation_space.shape == (256, 9)
