@@ -185,11 +185,30 @@ def test_vector_env_partial_reset_and_one_seed():
         vec.reset(seed=[1, 2, 3])
 
 
+def test_sb3_make_vec_env_reports_whole_episodes():
+    from stable_baselines3.common.env_util import make_vec_env
+
+    vec = make_vec_env("flownav/ABC-v0", n_envs=2, seed=0)  # asks for render_mode="rgb_array" first
+    vec.reset()
+    returns, ended = np.zeros(2), []
+    for _ in range(300):
+        _, reward, done, infos = vec.step(np.ones((2, 3), np.float32))  # full speed, turning: leaves the box
+        returns += reward
+        for i in np.flatnonzero(done):
+            ended.append((infos[i]["episode"]["r"], returns[i]))
+            returns[i] = 0.0
+    assert len(ended) >= 2
+    for monitor_return, summed in ended:
+        assert monitor_return == pytest.approx(summed, abs=1e-5)
+
+
 def test_bad_keywords_name_the_key():
     with pytest.raises(ConfigError, match=r"unknown env keyword\(s\) \['time_limt'\]; keys of conf/env/default"):
         FlowNavEnv(flow="abc", task="abc", time_limt=3)
     with pytest.raises(ConfigError, match=r"flow='abcd': no conf/flow/abcd.yaml; pass one of \['abc', "):
         FlowNavEnv(flow="abcd")
+    with pytest.raises(TypeError, match=r"^render_mode='human': flownav envs do not render; use flownav.viz on"):
+        FlowNavEnv(flow="abc", task="abc", render_mode="human")
 
 
 @pytest.mark.slow

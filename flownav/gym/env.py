@@ -67,6 +67,12 @@ def make_navigation_env(view: str, flow, task, num_envs: int, device="cpu", **en
     return build_env(env_cfg, flow_field, sampler, [view], num_envs=num_envs, device=device)
 
 
+def _refuse_render(render_mode) -> None:
+    if render_mode is not None:
+        # TypeError, as for an unknown argument: SB3's make_vec_env then makes the env without render_mode.
+        raise TypeError(f"render_mode={render_mode!r}: flownav envs do not render; use flownav.viz on rollouts")
+
+
 class _Swimmers:
     """What both adapters share: the TorchRL env, the action map, numpy observations and info."""
 
@@ -119,8 +125,7 @@ class FlowNavEnv(gymnasium.Env):
     def __init__(
         self, view: str = DEFAULT_VIEW, flow="cylinder", task="regions", device="cpu", render_mode=None, **env
     ):
-        if render_mode is not None:
-            raise ValueError(f"render_mode={render_mode!r}: flownav envs do not render; use flownav.viz on rollouts")
+        _refuse_render(render_mode)
         self.swimmers = _Swimmers(view, flow, task, 1, device, env)
         self.observation_space = spaces.Box(-np.inf, np.inf, (self.swimmers.obs_dim,), np.float32)
         self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
@@ -162,8 +167,7 @@ class FlowNavVectorEnv(VectorEnv):
         render_mode=None,
         **env,
     ):
-        if render_mode is not None:
-            raise ValueError(f"render_mode={render_mode!r}: flownav envs do not render; use flownav.viz on rollouts")
+        _refuse_render(render_mode)
         self.num_envs = int(num_envs)
         self.swimmers = _Swimmers(view, flow, task, self.num_envs, device, env)
         self.single_observation_space = spaces.Box(-np.inf, np.inf, (self.swimmers.obs_dim,), np.float32)
