@@ -183,6 +183,8 @@ def test_vector_env_partial_reset_and_one_seed():
     np.testing.assert_array_equal(after[1:], obs[1:])
     with pytest.raises(ValueError, match=r"seed=\[1, 2, 3\]: FlowNavVectorEnv takes one integer seed for all 3"):
         vec.reset(seed=[1, 2, 3])
+    with pytest.raises(ValueError, match=r"^action has shape \(2, 3\); expected \(3, 3\) \(values in \[-1, 1\]\)$"):
+        vec.step(np.zeros((2, 3), np.float32))
 
 
 def test_sb3_make_vec_env_reports_whole_episodes():

@@ -76,8 +76,9 @@ def _refuse_render(render_mode) -> None:
 class _Swimmers:
     """What both adapters share: the TorchRL env, the action map, numpy observations and info."""
 
-    def __init__(self, view: str, flow, task, num_envs: int, device, env: dict):
+    def __init__(self, view: str, flow, task, num_envs: int, device, env: dict, batched: bool):
         self.view = view
+        self.action_shape = (num_envs, 3) if batched else (3,)
         self.nav = make_navigation_env(view, flow, task, num_envs, device=device, **env)
         self.obs_dim = observation_size(view)
         space = self.nav.action_spec.space
@@ -93,9 +94,9 @@ class _Swimmers:
 
     def action(self, action) -> TensorDict:
         a = np.asarray(action, dtype=np.float32)
-        if a.shape != (self.nav.num_envs, 3):
-            raise ValueError(f"action has shape {a.shape[1:] if a.ndim > 1 else a.shape}; expected (3,) per swimmer")
-        a = torch.as_tensor(np.clip(a, -1.0, 1.0), device=self.nav.device)
+        if a.shape != self.action_shape:
+            raise ValueError(f"action has shape {a.shape}; expected {self.action_shape} (values in [-1, 1])")
+        a = torch.as_tensor(np.clip(a, -1.0, 1.0), device=self.nav.device).reshape(self.nav.num_envs, 3)
         act = self.low + (self.high - self.low) * (a + 1) / 2
         return TensorDict({"action": act}, batch_size=self.nav.batch_size, device=self.nav.device)
 
@@ -126,7 +127,7 @@ class FlowNavEnv(gymnasium.Env):
         self, view: str = DEFAULT_VIEW, flow="cylinder", task="regions", device="cpu", render_mode=None, **env
     ):
         _refuse_render(render_mode)
-        self.swimmers = _Swimmers(view, flow, task, 1, device, env)
+        self.swimmers = _Swimmers(view, flow, task, 1, device, env, batched=False)
         self.observation_space = spaces.Box(-np.inf, np.inf, (self.swimmers.obs_dim,), np.float32)
         self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
 
@@ -137,7 +138,7 @@ class FlowNavEnv(gymnasium.Env):
         return self.swimmers.observation(td)[0], self._info(td)
 
     def step(self, action):
-        nxt = self.swimmers.nav.step(self.swimmers.action(np.reshape(action, (1, -1))))["next"]
+        nxt = self.swimmers.nav.step(self.swimmers.action(action))["next"]
         obs = self.swimmers.observation(nxt)[0]
         reward = float(nxt["reward"][0, 0])
         return obs, reward, bool(nxt["terminated"][0, 0]), bool(nxt["truncated"][0, 0]), self._info(nxt)
@@ -169,7 +170,7 @@ class FlowNavVectorEnv(VectorEnv):
     ):
         _refuse_render(render_mode)
         self.num_envs = int(num_envs)
-        self.swimmers = _Swimmers(view, flow, task, self.num_envs, device, env)
+        self.swimmers = _Swimmers(view, flow, task, self.num_envs, device, env, batched=True)
         self.single_observation_space = spaces.Box(-np.inf, np.inf, (self.swimmers.obs_dim,), np.float32)
         self.single_action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
