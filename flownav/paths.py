@@ -1,9 +1,11 @@
-"""Paths relative to the repository: its root, the default flow dataset, and how a relative path resolves."""
+"""Paths relative to the repository: its root, the default dataset, shipped checkpoints and results, resolving."""
 
 from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_FLOW_DATASET = REPO_ROOT / "data" / "cylinder_re300"
+CHECKPOINT_DIR = REPO_ROOT / "checkpoints"
+RESULTS_DIR = REPO_ROOT / "results"
 
 
 def resolve(path: str | Path, base: Path = REPO_ROOT) -> Path:

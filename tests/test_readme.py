@@ -2,12 +2,24 @@
 
 import re
 
+import pytest
+
 from flownav.evaluation.metrics import summarize
 from flownav.paths import REPO_ROOT
 
 
 def readme_text() -> str:
     return (REPO_ROOT / "README.md").read_text()
+
+
+def run_block(containing: str, cwd, monkeypatch) -> dict:
+    """Run the README's one Python block that contains ``containing``, in ``cwd``; its namespace."""
+    blocks = [b for b in re.findall(r"```python\n(.*?)```", readme_text(), flags=re.S) if containing in b]
+    assert len(blocks) == 1, f"the README should hold one Python example with {containing!r}"
+    monkeypatch.chdir(cwd)
+    namespace: dict = {}
+    exec(compile(blocks[0], "README.md", "exec"), namespace)  # noqa: S102 - our own README
+    return namespace
 
 
 def test_bring_your_own_flow_snippet_runs_and_succeeds_as_stated(monkeypatch):
@@ -24,3 +36,17 @@ def test_bring_your_own_flow_snippet_runs_and_succeeds_as_stated(monkeypatch):
     assert len(episodes) == 1000
     rate = summarize(episodes.status, episodes.time)["success_rate"]
     assert lo <= rate <= hi, f"the README example now succeeds in {rate:.1%}, outside its stated [{lo:.1%}, {hi:.1%}]"
+
+
+def test_netcdf_snippet_runs_and_the_student_reaches_the_target(monkeypatch, tmp_path):
+    (tmp_path / "checkpoints").symlink_to(REPO_ROOT / "checkpoints")  # it writes current.nc where it runs
+    episodes = run_block("load_xarray_flow", tmp_path, monkeypatch)["episodes"]
+    assert len(episodes) == 200
+    assert summarize(episodes.status, episodes.time)["success_rate"] >= 0.95  # the README: 199 of 200
+
+
+@pytest.mark.slow
+def test_gymnasium_snippet_runs(monkeypatch):
+    namespace = run_block("flownav/CylinderWake-v0", REPO_ROOT, monkeypatch)
+    assert namespace["model"].num_timesteps == 2048
+    assert namespace["vec"].observation_space.shape == (256, 9)

@@ -12,7 +12,6 @@ xr = pytest.importorskip("xarray")
 from flownav.flows import load_grid_flow, save_grid_flow  # noqa: E402
 from flownav.flows.grid import GridFlowError  # noqa: E402
 from flownav.flows.xarray_data import EARTH_RADIUS, load_xarray_flow  # noqa: E402
-from flownav.paths import REPO_ROOT  # noqa: E402
 
 X = np.linspace(-2.0, 6.0, 5)  # m
 Y = np.linspace(-1.0, 2.0, 4)
@@ -176,14 +175,3 @@ def test_user_data_stays_float32(tmp_path):
     assert flow.velocity(torch.full((1, 3), 0.5), torch.zeros(1))[0, 0].item() == np.float32(1 / 3)
     path = save_grid_flow(tmp_path / "g", third, (0, 0, 0), (1, 1, 1), 1.0)
     assert load_grid_flow(path).velocity(torch.full((1, 3), 0.5), torch.zeros(1))[0, 0].item() == np.float32(1 / 3)
-
-
-def test_readme_netcdf_snippet_runs(monkeypatch, tmp_path):
-    text = (REPO_ROOT / "README.md").read_text()
-    blocks = [b for b in re.findall(r"```python\n(.*?)```", text, flags=re.S) if "load_xarray_flow" in b]
-    assert blocks, "the README lost its NetCDF example"
-    (tmp_path / "checkpoints").symlink_to(REPO_ROOT / "checkpoints")
-    monkeypatch.chdir(tmp_path)  # it writes current.nc
-    namespace: dict = {}
-    exec(compile(blocks[0], "README.md", "exec"), namespace)  # noqa: S102 - our own README
-    assert len(namespace["episodes"]) == 200
