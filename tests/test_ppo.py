@@ -115,24 +115,26 @@ def test_resume_continues_step_optimizer_and_normalizer(tmp_path):
     saved = load_checkpoint(tmp_path / "checkpoints" / "last.pt")
     assert saved["train_state"]["frames"] == 2 * batch and saved["train_state"]["iteration"] == 2
 
-    # restore_train_state puts exactly the saved tensors back
+    # restore_training_state puts exactly the saved tensors back (policy, optimiser, env)
     from flownav.builders import build_env, build_flow, build_task
+    from flownav.checkpoint import restore_training_state
 
     flow = build_flow(cfg.flow)
-    env = build_env(cfg.env, flow, build_task(cfg.task, flow), [cfg.obs.view], num_envs=8)
+    env = build_env(cfg.env, flow, build_task(cfg.task, flow), [cfg.obs.view], num_envs=256)
     low, high = env.action_spec.space.low[0], env.action_spec.space.high[0]
     policy, _, critic_net, critic = ppo.make_actor_critic(
         cfg.obs.view, cfg.obs.view, low, high, cfg.algo.actor, cfg.algo.critic
     )
     params = list(policy.parameters()) + list(critic_net.parameters())
     optim = torch.optim.Adam(params, lr=1e-3)
-    frames, it, *_ = ppo.restore_train_state(saved, policy, critic_net, optim, env)
-    assert (frames, it) == (2 * batch, 2)
+    st = restore_training_state(saved, policy, optim, env)
+    assert (st["frames"], st["iteration"]) == (2 * batch, 2)
     for k, v in saved["policy"]["state_dict"].items():
         torch.testing.assert_close(policy.state_dict()[k], v, rtol=0, atol=0)
     assert saved["policy"]["state_dict"]["normalizer.count"] > 0
-    for k, v in saved["train_state"]["critic"].items():
-        torch.testing.assert_close(critic_net.state_dict()[k], v, rtol=0, atol=0)
+    for k, v in saved["train_state"]["env"].items():
+        if torch.is_tensor(v):
+            torch.testing.assert_close(getattr(env, k, None) if k != "rng" else env.rng.get_state(), v, rtol=0, atol=0)
     for (_, a), (_, b) in zip(
         sorted(optim.state_dict()["state"].items()),
         sorted(saved["train_state"]["optimizer"]["state"].items()),
