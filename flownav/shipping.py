@@ -50,17 +50,18 @@ def experiment_budget(name: str, algo: str) -> dict:
 
 def require_full_budget(cfg) -> None:
     """Refuse (one line, naming the key) a run whose budget is below its experiment's."""
-    algo = str(cfg.algo.name)
-    for key, full in experiment_budget(str(cfg.name), algo).items():
-        if full is not None and float(cfg.algo[key]) < float(full):
+    algo = str(cfg["algo"]["name"])
+    for key, full in experiment_budget(str(cfg["name"]), algo).items():
+        if full is not None and float(cfg["algo"][key]) < float(full):
             raise ConfigError(
-                f"ship=true refused: algo.{key}={cfg.algo[key]} is below experiment {cfg.name}'s {full} (a partial "
-                "budget); drop ship=true for a try, or train with the experiment's budget"
+                f"shipping refused: algo.{key}={cfg['algo'][key]} is below experiment {cfg['name']}'s {full} "
+                "(a partial budget); drop ship=true for a try, or train with the experiment's budget"
             )
 
 
-def require_finished(payload: dict, what) -> None:
-    """Refuse a checkpoint of a run that stopped before its own budget (an interrupted or unfinished run)."""
+def require_shippable(payload: dict, what) -> None:
+    """Refuse the checkpoint of a run that stopped before its budget (interrupted, resumed but unfinished) or
+    whose budget is below its experiment's."""
     cfg = payload.get("meta", {}).get("config") or {}
     algo = (cfg.get("algo") or {}).get("name")
     st = payload.get("train_state") or {}
@@ -73,6 +74,7 @@ def require_finished(payload: dict, what) -> None:
             f"{what} stopped at {counter} {done} of algo.{setting}={budget} (an unfinished run); "
             "resume it to the end (resume=<run dir>) before shipping"
         )
+    require_full_budget(cfg)
 
 
 def train_targets(cfg, multirun: bool) -> dict:
@@ -98,7 +100,7 @@ def train_targets(cfg, multirun: bool) -> dict:
 def ship_run(run_dir: Path, targets: dict) -> dict:
     """Copy a finished run's policy and results record to the shipped places named by ``targets``."""
     last = Path(run_dir) / "checkpoints" / "last.pt"
-    require_finished(load_checkpoint(last), last)
+    require_shippable(load_checkpoint(last), last)
     shipped = {}
     if "checkpoint" in targets:
         shipped["checkpoint"] = str(ship_checkpoint(last, resolve(targets["checkpoint"])))

@@ -5,13 +5,17 @@ from __future__ import annotations
 
 import hashlib
 import math
+import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
 
+from flownav.builders import ConfigError
 from flownav.checkpoint import load_checkpoint, save_policy_checkpoint
 from flownav.envs import NavigationEnv, RegionTask
 from flownav.envs.reward import RewardConfig
@@ -231,3 +235,100 @@ def test_dagger_resumes_bit_for_bit_after_a_failure(teacher_ckpt, tmp_path, monk
     a, b = tmp_path / "straight" / "checkpoints" / "last.pt", tmp_path / "part" / "checkpoints" / "last.pt"
     assert max_weight_difference(a, b) == 0.0
     assert not list((tmp_path / "part" / "checkpoints").glob("buffer*"))
+
+
+# ----------------------------------------------------------------------------- never overwritten
+STUDENT_SMOKE = [
+    "+experiment=student",
+    "flow=vortex_street",
+    "algo.iterations=1",
+    "algo.num_envs=16",
+    "algo.steps_per_iteration=10",
+    "algo.updates_per_iteration=2",
+    "algo.batch_size=64",
+    "algo.final_eval_episodes=0",
+    *QUIET,
+]
+
+
+@pytest.mark.slow
+def test_smoke_runs_leave_shipped_files_byte_identical(tmp_path):
+    """A one-iteration student and a 50-episode paper evaluation, as a user types them: all in their run dirs."""
+    before = tree_digest(*SHIPPED)
+    env = os.environ | {"OMP_NUM_THREADS": "1"}
+    train_run = tmp_path / "train"
+    subprocess.run(
+        [sys.executable, "train.py", *STUDENT_SMOKE, f"hydra.run.dir={train_run}"], cwd=ROOT, env=env, check=True
+    )
+    eval_run = tmp_path / "eval"
+    subprocess.run(
+        [sys.executable, "evaluate.py", "+experiment=paper_training", "max_episodes=50", "flow=vortex_street"]
+        + [f"hydra.run.dir={eval_run}"],
+        cwd=ROOT,
+        env=env,
+        check=True,
+    )
+    assert tree_digest(*SHIPPED) == before
+    assert (train_run / "checkpoints" / "last.pt").is_file() and (train_run / "results.json").is_file()
+    assert (eval_run / "REPORT.md").is_file() and (eval_run / "paper.json").is_file()
+
+
+def test_shipping_a_partial_run_is_refused_before_anything_is_written(tmp_path):
+    import evaluate
+    import train
+    from flownav.shipping import train_targets
+
+    cfg = compose_train(*STUDENT_SMOKE, "ship=true", f"output_checkpoint={tmp_path / 's.pt'}")
+    with pytest.raises(ConfigError, match=r"^shipping refused: algo\.iterations=1 is below experiment student's 30 "):
+        train.run(cfg, tmp_path / "run")
+    assert not any(tmp_path.iterdir())
+    with pytest.raises(ConfigError, match=r"^ship=true in a -m sweep: the seeds would race for one file"):
+        train_targets(compose_train("+experiment=student", "ship=true"), multirun=True)
+
+    before = tree_digest(*SHIPPED)
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        ecfg = compose("evaluate", overrides=["+experiment=paper_training", "max_episodes=50", "report=REPORT.md"])
+    with pytest.raises(ConfigError, match=r"^max_episodes=50 caps the episode count: a reduced run never writes"):
+        evaluate.run(ecfg, log=lambda *_: None)
+    assert tree_digest(*SHIPPED) == before
+
+
+def test_ship_copies_a_finished_run_without_its_resume_state(tmp_path, monkeypatch):
+    """ship=true at the experiment's budget (shrunk here) copies the policy (no env state, no buffer) and record."""
+    import train
+    from flownav import shipping
+
+    tiny_budget = {"iterations": 1, "num_envs": 16, "steps_per_iteration": 10, "updates_per_iteration": 2}
+    monkeypatch.setattr(shipping, "experiment_budget", lambda name, algo: tiny_budget | {"final_eval_episodes": 0})
+    out, record = tmp_path / "ship" / "student.pt", tmp_path / "ship" / "student.json"
+    final = train.run(
+        compose_train(*STUDENT_SMOKE, "ship=true", f"output_checkpoint={out}", f"algo.results_json={record}"),
+        tmp_path / "run",
+    )
+    assert final["shipped"] == {"checkpoint": str(out), "results": str(record)}
+    shipped, last = load_checkpoint(out), load_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt")
+    assert {"env", "buffer"} <= set(last["train_state"]) and not {"env", "buffer"} & set(shipped["train_state"])
+    assert all(torch.equal(shipped["policy"]["state_dict"][k], v) for k, v in last["policy"]["state_dict"].items())
+    assert record.read_bytes() == (tmp_path / "run" / "results.json").read_bytes()
+
+
+# ----------------------------------------------------------------------------- resume is safe
+def test_resume_accepts_only_a_run_directory_and_writes_nothing_before_its_checks(tmp_path):
+    import train
+
+    before = tree_digest(*SHIPPED)
+    cfg = compose_train(*STUDENT_SMOKE, f"resume={ROOT / 'checkpoints' / 'teacher.pt'}")
+    with pytest.raises(ConfigError, match=r"is not a run directory \(no config\.yaml\); pass the directory of the run"):
+        train.run(cfg, tmp_path / "run")
+    with pytest.raises(ConfigError, match=r"no such run directory"):
+        train.run(compose_train(*STUDENT_SMOKE, f"resume={tmp_path / 'nothing'}"), tmp_path / "run")
+    # A run directory whose last.pt is a shipped policy (no training state): refused, nothing written into it.
+    fake = tmp_path / "fake"
+    (fake / "checkpoints").mkdir(parents=True)
+    (fake / "config.yaml").write_text("name: student\n")
+    policy_file = fake / "checkpoints" / "last.pt"
+    policy_file.write_bytes((ROOT / "checkpoints" / "student.pt").read_bytes())
+    with pytest.raises(ConfigError, match=r"holds no training state to resume from \(no .*env"):
+        train.run(compose_train(*STUDENT_SMOKE, f"resume={policy_file}"), tmp_path / "run")
+    assert sorted(p.name for p in fake.rglob("*")) == ["checkpoints", "config.yaml", "last.pt"]
+    assert not (tmp_path / "run").exists() and tree_digest(*SHIPPED) == before
