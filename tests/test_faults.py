@@ -281,9 +281,26 @@ def test_shipping_a_partial_run_is_refused_before_anything_is_written(tmp_path):
     cfg = compose_train(*STUDENT_SMOKE, "ship=true", f"output_checkpoint={tmp_path / 's.pt'}")
     with pytest.raises(ConfigError, match=r"^shipping refused: algo\.iterations=1 is below experiment student's 30 "):
         train.run(cfg, tmp_path / "run")
-    assert not any(tmp_path.iterdir())
+    assert not (tmp_path / "run").exists() and not (tmp_path / "s.pt").exists()
     with pytest.raises(ConfigError, match=r"^ship=true in a -m sweep: the seeds would race for one file"):
         train_targets(compose_train("+experiment=student", "ship=true"), multirun=True)
+    # A run stopped (or resumed but not finished) before its budget: its last.pt is never shipped.
+    from omegaconf import OmegaConf
+
+    from flownav.agents import DeterministicPolicy
+    from flownav.shipping import ship_run
+
+    full = OmegaConf.to_container(compose_train("+experiment=student"), resolve=True)
+    stopped = tmp_path / "stopped"
+    policy = DeterministicPolicy(6, [0.0, -0.7, -1.5], [1.0, 0.7, 1.5], hidden=(8,))
+    save_policy_checkpoint(
+        stopped / "checkpoints" / "last.pt", policy, "ego", "student", {"config": full}, {"iteration": 7}
+    )
+    with pytest.raises(
+        ConfigError, match=r"last\.pt stopped at iteration 7 of algo\.iterations=30 \(an unfinished run\)"
+    ):
+        ship_run(stopped, {"checkpoint": str(tmp_path / "s.pt")})
+    assert not (tmp_path / "s.pt").exists()
 
     before = tree_digest(*SHIPPED)
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):

@@ -49,6 +49,7 @@ from flownav.runlog import RunLogger
 LOSS_CRITIC_TYPES = ("l1", "l2", "smooth_l1")
 RESUME_NEEDS = ("critic", "ep_return", "sampler")  # PPO's own entries of last.pt's train_state
 NON_FINITE_FIX = "check env.reward, algo.lr, algo.max_grad_norm and the flow"
+CHECKED_LOSSES = ("loss/objective", "loss/critic", "loss/grad_norm")  # the first columns of each update's losses
 
 
 # ----------------------------------------------------------------------------- networks
@@ -358,11 +359,8 @@ def train(cfg, run_dir) -> dict:
             if normalize_online:
                 policy.normalizer.update(data[obs_key])
                 critic_net.normalizer.update(data[critic_key])
-            names = ("loss/objective", "loss/critic", "loss/grad_norm")
-            require_finite_update(
-                "PPO", iteration, dict(zip(names, torch.stack(losses)[:, :3].T, strict=True)), loss_module,
-                ckpt_dir / "last.pt", NON_FINITE_FIX,
-            )  # fmt: skip
+            checked = dict(zip(CHECKED_LOSSES, torch.stack(losses)[:, :3].T, strict=True))
+            require_finite_update("PPO", iteration, checked, loss_module, ckpt_dir / "last.pt", NON_FINITE_FIX)
             collector.update_policy_weights_()
             t_train = time.time() - t_train
 
