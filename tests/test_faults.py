@@ -197,7 +197,8 @@ def interrupt_at(monkeypatch, module, k):
 
 
 def max_weight_difference(a: Path, b: Path) -> float:
-    sa, sb = (load_checkpoint(p)["policy"]["state_dict"] for p in (a, b))
+    # weights_only: a run's whole last.pt (env state, buffer, sampler) loads without unpickling code
+    sa, sb = (torch.load(p, weights_only=True)["policy"]["state_dict"] for p in (a, b))
     return max(float((sa[k].double() - sb[k].double()).abs().max()) for k in sa)
 
 
