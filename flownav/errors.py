@@ -12,14 +12,21 @@ class NonFiniteError(FloatingPointError):
 def require_finite(x: torch.Tensor, what: str, fix: str, positions: torch.Tensor | None = None) -> None:
     """Raise :class:`NonFiniteError` unless every entry of ``x`` (one row per swimmer) is finite.
 
-    One ``isfinite().all()`` on the hot path; the details are only worked out when it fails.
+    The hot path is one sum (NaN and infinity propagate through it; a bool ``isfinite().all()`` costs about
+    five times more on CPU); the details are only worked out when it fails. Values so large that their sum
+    overflows are refused too.
     """
-    if torch.isfinite(x).all():
+    if torch.isfinite(x.sum()):
         return
-    bad = ~torch.isfinite(x.reshape(x.shape[0], -1)).all(-1) if x.dim() else torch.ones(1, dtype=torch.bool)
+    rows = x.reshape(x.shape[0], -1) if x.dim() else x.reshape(1, 1)
+    bad = ~torch.isfinite(rows).all(-1)
+    if not bad.any():  # every entry finite, their sum not: absurdly large values
+        bad = rows.abs().amax(-1) == rows.abs().max()
+        what = f"{what} is too large ({float(rows.abs().max()):.3g})"
+    else:
+        what = f"{what} is not finite"
     first = int(bad.nonzero()[0, 0])
-    value = x.reshape(bad.shape[0], -1)[first].tolist() if x.dim() else float(x)
     at = f" at position {[round(v, 4) for v in positions[first].tolist()]}" if positions is not None else ""
     raise NonFiniteError(
-        f"{what} is not finite for {int(bad.sum())} of {bad.shape[0]} swimmers (swimmer {first}{at}: {value}); {fix}"
+        f"{what} for {int(bad.sum())} of {bad.shape[0]} swimmers (swimmer {first}{at}: {rows[first].tolist()}); {fix}"
     )
