@@ -3,9 +3,13 @@
     python evaluate.py checkpoint=checkpoints/student.pt                          # training flow, 10,000 episodes
     python evaluate.py checkpoint=checkpoints/teacher.pt env.misalignment_deg=90  # a misaligned wake
     python evaluate.py checkpoint=checkpoints/student.pt flow=abc task=abc env.swim_speed_scale=0.1
-    python evaluate.py +experiment=paper                 # the whole paper -> REPORT.md, results/paper.json
-    python evaluate.py +experiment=paper_misalignment    # one experiment (merged into the report)
-    python evaluate.py +experiment=paper flow=vortex_street max_episodes=500      # a quick dry run
+    python evaluate.py +experiment=paper ship=true       # the whole paper -> REPORT.md, results/paper.json
+    python evaluate.py +experiment=paper_misalignment ship=true    # one experiment (merged into the report)
+    python evaluate.py +experiment=paper flow=vortex_street max_episodes=500      # a quick dry run (run dir only)
+
+Without ``ship=true`` (or an explicit ``report=`` / ``results=`` / ``figures_dir=``) the suite writes its report,
+results and figures into its own run directory (Hydra's output dir); shipping a reduced episode count
+(``max_episodes``) is refused.
 
 Episodes are deterministic (the policy's mean action) and counted exactly: one per env slot, no
 auto-reset. See docs/evaluation.md.
@@ -21,6 +25,7 @@ from pathlib import Path
 
 import hydra
 import torch
+from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
 from flownav import schema
@@ -29,7 +34,8 @@ from flownav.checkpoint import load_policy
 from flownav.errors import ConfigError, reported_as_one_line
 from flownav.evaluation.metrics import summarize
 from flownav.evaluation.rollout import run_episodes
-from flownav.paths import resolve
+from flownav.paths import REPO_ROOT, resolve
+from flownav.shipping import is_shipped
 
 
 def command_line() -> str:
@@ -68,17 +74,49 @@ def evaluate_checkpoint(cfg: DictConfig, log=print) -> dict:
         f"{f['hit_obstacle']['count']}, out of time {f['timeout']['count']} ({out['seconds']} s)"
     )
     if cfg.get("output"):
-        path = Path(str(cfg.output))
+        path = Path(str(cfg.output))  # named explicitly (a shipped place only with the full count: run())
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(out, indent=1))
     return out
 
 
+def run_dir() -> Path:
+    """Hydra's output directory of this run (outside Hydra, e.g. evaluate.run() from Python: a fresh one)."""
+    try:
+        return Path(HydraConfig.get().runtime.output_dir)
+    except ValueError:
+        return REPO_ROOT / "outputs" / "evaluate" / time.strftime("%Y-%m-%d_%H-%M-%S")
+
+
+SUITE_OUTPUTS = {"results": "results/paper.json", "report": "REPORT.md", "figures_dir": "results/figures"}
+
+
+def suite_outputs(cfg: DictConfig) -> None:
+    """Fill in where the suite writes: an explicit path as given; else the shipped place with ship=true, else
+    the run directory. Writing a shipped place (results/, REPORT.md) with a reduced episode count is refused."""
+    here = None
+    for key, shipped in SUITE_OUTPUTS.items():
+        if not cfg.get(key):
+            here = here or run_dir()
+            cfg[key] = str(resolve(shipped) if cfg.get("ship") else here / Path(shipped).name)
+    for spec in cfg.suite.values():  # an experiment's own file (e.g. results/student_loss.json)
+        if spec is not None and spec.get("json") and is_shipped(spec.json) and not cfg.get("ship"):
+            here = here or run_dir()
+            spec.json = str(here / Path(str(spec.json)).name)
+    shipped = [str(cfg[k]) for k in SUITE_OUTPUTS if is_shipped(cfg[k])]
+    if shipped and cfg.get("max_episodes"):
+        raise ConfigError(
+            f"max_episodes={cfg.max_episodes} caps the episode count: a reduced run never writes {shipped[0]}; "
+            "drop ship=true (and the explicit report=/results=/figures_dir=) for a try, or drop max_episodes"
+        )
+
+
 def run_paper(cfg: DictConfig, log=print) -> dict:
-    """Run the suite, merge it into ``cfg.results`` and rewrite ``cfg.report``."""
+    """Run the suite, merge it into ``cfg.results`` and rewrite ``cfg.report`` (see :func:`suite_outputs`)."""
     from flownav.evaluation.experiments import run_suite
     from flownav.evaluation.report import merge_results, provenance, write_report
 
+    suite_outputs(cfg)
     cmd = command_line()
     # Before the run: its own outputs (figures, results) are tracked files and would mark the commit dirty.
     prov = provenance(cmd)
@@ -101,7 +139,15 @@ def run(cfg: DictConfig, log=print) -> dict:
         torch.set_num_threads(int(cfg.threads))
     if cfg.get("suite"):
         return run_paper(cfg, log)
+    if cfg.get("output") and is_shipped(cfg.output) and int(cfg.episodes) < FULL_EPISODES:
+        raise ConfigError(
+            f"episodes={cfg.episodes} is below the {FULL_EPISODES} a shipped result ({cfg.output}) needs; "
+            "write output= outside results/ for a try"
+        )
     return evaluate_checkpoint(cfg, log)
+
+
+FULL_EPISODES = 10_000  # the held-out count of every shipped evaluation
 
 
 KNOWN_KEYS = {
@@ -123,6 +169,7 @@ KNOWN_KEYS = {
     "results",
     "report",
     "figures_dir",
+    "ship",
 }
 
 

@@ -7,9 +7,11 @@
     python train.py +experiment=teacher resume=outputs/teacher/<run>             # continue a run
     python train.py +experiment=teacher hydra.run.dir=<run> resume=auto          # continue <run> if it has last.pt
     python train.py +experiment=teacher flow=vortex_street algo.total_frames=2e6 # analytic stand-in flow
+    python train.py +experiment=student ship=true     # full budget: also copy to output_checkpoint, results_json
 
-The run directory (Hydra's output dir) holds config.yaml, metrics.csv, checkpoints/ and final_metrics.json.
-A multirun's sweep directory also gets sweep_summary.json / .md (flownav/sweep.py, docs/ecosystem.md).
+The run directory (Hydra's output dir) holds config.yaml, metrics.csv, checkpoints/ and final_metrics.json;
+a run writes nowhere else unless ``ship=true`` (flownav/shipping.py). A multirun's sweep directory also gets
+sweep_summary.json / .md (flownav/sweep.py, docs/ecosystem.md).
 ``train.py`` dispatches on ``algo.name`` to ``flownav.algorithms.<name>.train(cfg, run_dir)``.
 """
 
@@ -29,8 +31,10 @@ from omegaconf import DictConfig, OmegaConf
 
 from flownav import schema
 from flownav.algorithms import ALGORITHMS
+from flownav.checkpoint import find_resume, load_resume_checkpoint
 from flownav.errors import reported_as_one_line
 from flownav.resume import resolve_resume
+from flownav.shipping import ship_run, train_targets
 
 
 def validate(cfg: DictConfig) -> None:
@@ -38,43 +42,43 @@ def validate(cfg: DictConfig) -> None:
     schema.check_train(cfg)
 
 
+def multirun_jobs() -> int | None:
+    """The number of parallel jobs of a -m sweep, None outside one (or outside Hydra: tests call run())."""
+    try:
+        hc = HydraConfig.get()
+    except ValueError:
+        return None
+    if hc.mode != RunMode.MULTIRUN:
+        return None
+    jobs = int(OmegaConf.select(hc, "launcher.n_jobs", default=1) or 1)
+    return jobs if jobs > 0 else os.cpu_count() or 1
+
+
 def pick_threads(cfg: DictConfig) -> int:
     if cfg.threads is not None:
         return int(cfg.threads)
     cores = os.cpu_count() or 1
-    try:
-        hc = HydraConfig.get()
-        if hc.mode == RunMode.MULTIRUN:
-            jobs = int(OmegaConf.select(hc, "launcher.n_jobs", default=1) or 1)
-            jobs = jobs if jobs > 0 else cores
-            return max(1, cores // jobs)
-    except ValueError:  # not running under Hydra (tests call run() directly)
-        pass
-    return cores
-
-
-def resume_run_dir(resume) -> Path | None:
-    """A resumed run writes into the directory it resumes (its metrics.csv and checkpoints continue)."""
-    path = Path(str(resume)).expanduser()
-    if path.is_dir():
-        return path
-    if path.is_file() and path.parent.name == "checkpoints":
-        return path.parent.parent
-    return None
+    return max(1, cores // (multirun_jobs() or 1))
 
 
 def run(cfg: DictConfig, run_dir: str | Path) -> dict:
     validate(cfg)
-    torch.set_num_threads(pick_threads(cfg))
+    algo = importlib.import_module(ALGORITHMS[cfg.algo.name])
     cfg.resume = resolve_resume(cfg.resume, run_dir)  # resume=auto, and requeued cluster jobs: own last.pt
+    # Every check before the first write: what ship=true would copy, and the run a resume continues
+    # (it writes into that run's directory: its metrics.csv and checkpoints continue).
+    targets = train_targets(cfg, multirun=multirun_jobs() is not None)
     if cfg.resume:
-        run_dir = resume_run_dir(cfg.resume) or run_dir
+        run_dir, _ = find_resume(cfg.resume)
+        load_resume_checkpoint(cfg.resume, str(cfg.obs.view), needs=algo.RESUME_NEEDS)
+    torch.set_num_threads(pick_threads(cfg))
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     OmegaConf.save(cfg, run_dir / ("config_resumed.yaml" if cfg.resume else "config.yaml"), resolve=True)
-    algo = importlib.import_module(ALGORITHMS[cfg.algo.name])
     metrics = algo.train(cfg, run_dir)
     clean = {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in metrics.items()}
+    if targets:
+        clean["shipped"] = ship_run(run_dir, targets)
     (run_dir / "final_metrics.json").write_text(json.dumps(clean, indent=2, default=str))
     return clean
 

@@ -6,9 +6,12 @@ A checkpoint is a ``torch.save`` dict with ``format == "flownav-policy-v1"``:
   ``state_dict`` (normaliser statistics included);
 * ``obs``: the observation view it reads (a key of ``flownav.envs.observations.VIEWS``);
 * ``role``: ``teacher``, ``baseline`` or ``student``; ``meta``: free (config, step, metrics);
-* ``train_state``: anything a resumed run needs (optimiser, step counters, RNG), optional.
+* ``train_state``: anything a resumed run needs (optimiser, step counters, RNG, the env's state, a
+  trainer's own data such as DAgger's aggregated pairs), optional. A run's ``last.pt`` is that one file:
+  a resumed run continues bit for bit (:func:`training_state`, :func:`restore_training_state`).
 
-Writes are atomic (temporary file, then rename), so a kill never leaves half a checkpoint.
+Writes are atomic (temporary file, then rename), so a kill never leaves half a checkpoint, and a checkpoint
+holding a NaN or an infinity is never written (:class:`~flownav.errors.NonFiniteError`).
 Reads never run code: :func:`safe_torch_load` unpickles tensors and plain containers only
 (``weights_only=True``) and refuses anything else with a :class:`CheckpointError`.
 """
@@ -26,7 +29,7 @@ from tensordict.nn import TensorDictModule
 from flownav.agents.networks import DeterministicPolicy
 from flownav.atomic import atomic_write
 from flownav.envs.observations import observation_size
-from flownav.errors import CheckpointError, ConfigError
+from flownav.errors import CheckpointError, ConfigError, NonFiniteError
 
 __all__ = ["CheckpointError", "load_checkpoint", "load_policy", "safe_torch_load", "save_policy_checkpoint"]
 
@@ -35,6 +38,22 @@ FORMAT = "flownav-policy-v1"
 
 def atomic_torch_save(obj, path: str | os.PathLike) -> Path:
     return atomic_write(path, lambda f: torch.save(obj, f))
+
+
+def non_finite_entries(obj, prefix: str = "") -> list[str]:
+    """Names of the floating-point tensors in a nested dict / list that hold a NaN or an infinity."""
+    if torch.is_tensor(obj):
+        return [prefix] if obj.is_floating_point() and not torch.isfinite(obj).all() else []
+    items = obj.items() if isinstance(obj, dict) else enumerate(obj) if isinstance(obj, list | tuple) else ()
+    return [name for k, v in items for name in non_finite_entries(v, f"{prefix}.{k}" if prefix else str(k))]
+
+
+def require_finite_payload(payload: dict, path) -> None:
+    bad = non_finite_entries({"policy": payload["policy"], "train_state": payload.get("train_state") or {}})
+    if bad:
+        raise NonFiniteError(
+            f"refusing to write {path}: {', '.join(bad[:3])}{' ...' if len(bad) > 3 else ''} hold NaN or infinity"
+        )
 
 
 def save_policy_checkpoint(
@@ -52,6 +71,7 @@ def save_policy_checkpoint(
         "meta": meta or {},
         "train_state": train_state,
     }
+    require_finite_payload(payload, path)
     return atomic_torch_save(payload, path)
 
 
@@ -70,6 +90,41 @@ def safe_torch_load(path, safe_globals=()):
         ) from e
     except Exception as e:  # noqa: BLE001 - any other unpickling failure means a corrupt file
         raise CheckpointError(f"cannot read checkpoint {path} ({e}); it is corrupt or not a flownav checkpoint") from e
+
+
+# ----------------------------------------------------------------------------- training state (exact resume)
+def training_state(env, optimizer, counters: dict, **extra) -> dict:
+    """What every trainer's ``last.pt`` carries to resume bit for bit: counters, optimiser, torch RNG, env state."""
+    return {
+        **counters,
+        "optimizer": optimizer.state_dict(),
+        "rng": {"torch": torch.get_rng_state()},
+        "env": env.state_dict(),
+        **extra,
+    }
+
+
+def restore_training_state(payload: dict, policy, optimizer, env) -> dict:
+    """Put the policy, optimiser, env state and torch RNG of a ``last.pt`` back; return its train_state."""
+    st = payload["train_state"]  # checked by load_resume_checkpoint
+    policy.load_state_dict(payload["policy"]["state_dict"])
+    optimizer.load_state_dict(st["optimizer"])
+    env.load_state_dict(st["env"])
+    torch.set_rng_state(st["rng"]["torch"])
+    return st
+
+
+RESUME_ONLY = ("env", "buffer")  # train_state entries a shipped copy leaves out (only a resumed run reads them)
+
+
+def ship_checkpoint(src, dst) -> Path:
+    """Copy a run's checkpoint to a shipped place (e.g. checkpoints/student.pt), atomically, without the
+    entries only a resume needs; refused if it holds a NaN or an infinity."""
+    payload = load_checkpoint(src)
+    if payload.get("train_state"):
+        payload["train_state"] = {k: v for k, v in payload["train_state"].items() if k not in RESUME_ONLY}
+    require_finite_payload(payload, dst)
+    return atomic_torch_save(payload, dst)
 
 
 def load_checkpoint(path) -> dict:
@@ -92,30 +147,47 @@ def load_checkpoint(path) -> dict:
     return payload
 
 
-def find_resume_checkpoint(resume) -> Path:
-    """The checkpoint a ``resume=`` value names: a file, or a run directory's ``checkpoints/last.pt``.
+RUN_CONFIGS = ("config.yaml", ".hydra/config.yaml")  # what train.py (and Hydra) write into every run directory
 
-    A wrong value is a config error (``ConfigError``), reported at start like any other bad key.
+
+def find_resume(resume) -> tuple[Path, Path]:
+    """The run directory and checkpoint a ``resume=`` value names: a run directory (one that holds its
+    config.yaml) or its ``checkpoints/last.pt``. Anything else (a shipped policy, a stray file) is a config
+    error (``ConfigError``), reported before anything is written.
     """
     path = Path(str(resume)).expanduser()
-    if path.is_dir():
-        for candidate in (path / "checkpoints" / "last.pt", path / "last.pt"):
-            if candidate.is_file():
-                return candidate
-        raise ConfigError(f"resume={resume}: no checkpoints/last.pt in that run directory")
-    if not path.is_file():
-        raise ConfigError(f"resume={resume}: no such run directory or checkpoint file")
-    return path
+    if path.is_file() and path.parent.name == "checkpoints":
+        run_dir, ckpt = path.parent.parent, path
+    elif path.is_dir():
+        run_dir, ckpt = path, path / "checkpoints" / "last.pt"
+    else:
+        raise ConfigError(f"resume={resume}: no such run directory; pass a run directory (outputs/<name>/<run>)")
+    if not any((run_dir / c).is_file() for c in RUN_CONFIGS):
+        raise ConfigError(
+            f"resume={resume}: {run_dir} is not a run directory (no config.yaml); pass the directory of the run "
+            "to continue (outputs/<name>/<run>), not a shipped checkpoint"
+        )
+    if not ckpt.is_file():
+        raise ConfigError(f"resume={resume}: no {ckpt.relative_to(run_dir)} in that run directory")
+    return run_dir, ckpt
 
 
-def load_resume_checkpoint(resume, expect_obs: str) -> tuple[Path, dict]:
-    """The checkpoint ``resume=`` names (path, payload), refused (a config error) if it was trained on another view."""
-    path = find_resume_checkpoint(resume)
+def load_resume_checkpoint(resume, expect_obs: str, needs=()) -> tuple[Path, dict]:
+    """The checkpoint ``resume=`` names (path, payload), refused (a config error) if it was trained on another
+    view or lacks the training state (``needs``: a trainer's own entries) a bit-exact resume reads."""
+    _, path = find_resume(resume)
     payload = load_checkpoint(path)
     if payload["obs"] != expect_obs:
         raise ConfigError(
             f"resume={resume}: that run trained a {payload['role']} on {payload['obs']!r} observations but this "
             f"config asks for {expect_obs!r}; resume with the same obs (obs={payload['obs']})"
+        )
+    st = payload.get("train_state") or {}
+    missing = [k for k in ("optimizer", "rng", "env", *needs) if k not in st]
+    if missing:
+        raise ConfigError(
+            f"resume={resume}: {path} holds no training state to resume from (no {', '.join(missing)}); "
+            "resume from the run directory of a run of this version"
         )
     return path, payload
 

@@ -23,6 +23,14 @@ class EpisodeWindow:
         self.ep_return = torch.zeros(self.num_envs, device=device)
         self._returns, self._status, self._time = [], [], []
 
+    def state_dict(self) -> dict:
+        """The running returns and the window's episodes: what an exactly resumed run needs."""
+        return {"ep_return": self.ep_return, "episodes": (self._returns, self._status, self._time)}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.ep_return = state["ep_return"].to(self.ep_return.device).clone()
+        self._returns, self._status, self._time = (list(w) for w in state["episodes"])
+
     def add(self, nxt) -> None:
         """One batch's ``next`` tensordict, batch shape [B, T] (or [B * T]) with reward, done, status, time."""
         b = self.num_envs

@@ -4,6 +4,7 @@ from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_FLOW_DATASET = REPO_ROOT / "data" / "cylinder_re300"
+DATA_DIR = REPO_ROOT / "data"
 CHECKPOINT_DIR = REPO_ROOT / "checkpoints"
 RESULTS_DIR = REPO_ROOT / "results"
 

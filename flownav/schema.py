@@ -320,6 +320,7 @@ TRAIN = RUN | {
     "resume": Str(null=True),
     "checkpoint_every": Int(ge=1, null=True),
     "output_checkpoint": Str(null=True),
+    "ship": Bool(),
     "logger": LOGGER,
 }
 
@@ -329,9 +330,10 @@ EVALUATE = RUN | {
     "output": Str(null=True),
     "chunk_size": Int(ge=1),
     "max_episodes": Int(ge=1, null=True),
-    "results": Str(),
-    "report": Str(),
-    "figures_dir": Str(),
+    "results": Str(null=True),
+    "report": Str(null=True),
+    "figures_dir": Str(null=True),
+    "ship": Bool(),
 }
 
 

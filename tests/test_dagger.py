@@ -87,12 +87,9 @@ def test_beta_schedule_and_loss():
 def test_dagger_learns_the_teacher(teacher_ckpt, tmp_path):
     import train
 
-    out = tmp_path / "student.pt"
-    final = train.run(
-        make_cfg(teacher_ckpt, "algo.iterations=5", f"output_checkpoint={out}", f"algo.results_json={tmp_path}/r.json"),
-        tmp_path / "run",
-    )
-    assert json.loads((tmp_path / "r.json").read_text())["curve"][-1]["iteration"] == 5
+    final = train.run(make_cfg(teacher_ckpt, "algo.iterations=5"), tmp_path / "run")
+    out = tmp_path / "run" / "checkpoints" / "last.pt"
+    assert json.loads((tmp_path / "run" / "results.json").read_text())["curve"][-1]["iteration"] == 5
     losses = [float(r["train/loss"]) for r in rows(tmp_path / "run")]
     onpolicy = [float(r["train/loss_onpolicy"]) for r in rows(tmp_path / "run")]
     assert losses[-1] < 0.6 * losses[0] and onpolicy[-1] < 0.7 * max(onpolicy[:2])
@@ -101,8 +98,8 @@ def test_dagger_learns_the_teacher(teacher_ckpt, tmp_path):
     policy, payload = load_policy(out, expect_obs="ego")
     assert payload["role"] == "student" and policy.config["n_outputs"] == 3
     # The normaliser holds the statistics of all aggregated observations.
-    buf = torch.load(tmp_path / "run" / "checkpoints" / "buffer.pt", weights_only=False)
-    obs = buf["_storage"]["_storage"]["obs"][: buf["_storage"]["_len"]]
+    obs = payload["train_state"]["buffer"]["obs"]  # the filled part of the buffer, in last.pt
+    assert len(obs) == 5 * 64 * 60
     assert torch.allclose(policy.normalizer.mean, obs.mean(0), atol=1e-4)
     assert torch.allclose(policy.normalizer.var, obs.var(0, unbiased=False), rtol=1e-3)
 

@@ -115,24 +115,26 @@ def test_resume_continues_step_optimizer_and_normalizer(tmp_path):
     saved = load_checkpoint(tmp_path / "checkpoints" / "last.pt")
     assert saved["train_state"]["frames"] == 2 * batch and saved["train_state"]["iteration"] == 2
 
-    # restore_train_state puts exactly the saved tensors back
+    # restore_training_state puts exactly the saved tensors back (policy, optimiser, env)
     from flownav.builders import build_env, build_flow, build_task
+    from flownav.checkpoint import restore_training_state
 
     flow = build_flow(cfg.flow)
-    env = build_env(cfg.env, flow, build_task(cfg.task, flow), [cfg.obs.view], num_envs=8)
+    env = build_env(cfg.env, flow, build_task(cfg.task, flow), [cfg.obs.view], num_envs=256)
     low, high = env.action_spec.space.low[0], env.action_spec.space.high[0]
     policy, _, critic_net, critic = ppo.make_actor_critic(
         cfg.obs.view, cfg.obs.view, low, high, cfg.algo.actor, cfg.algo.critic
     )
     params = list(policy.parameters()) + list(critic_net.parameters())
     optim = torch.optim.Adam(params, lr=1e-3)
-    frames, it, *_ = ppo.restore_train_state(saved, policy, critic_net, optim, env)
-    assert (frames, it) == (2 * batch, 2)
+    st = restore_training_state(saved, policy, optim, env)
+    assert (st["frames"], st["iteration"]) == (2 * batch, 2)
     for k, v in saved["policy"]["state_dict"].items():
         torch.testing.assert_close(policy.state_dict()[k], v, rtol=0, atol=0)
     assert saved["policy"]["state_dict"]["normalizer.count"] > 0
-    for k, v in saved["train_state"]["critic"].items():
-        torch.testing.assert_close(critic_net.state_dict()[k], v, rtol=0, atol=0)
+    for k, v in saved["train_state"]["env"].items():
+        if torch.is_tensor(v):
+            torch.testing.assert_close(getattr(env, k, None) if k != "rng" else env.rng.get_state(), v, rtol=0, atol=0)
     for (_, a), (_, b) in zip(
         sorted(optim.state_dict()["state"].items()),
         sorted(saved["train_state"]["optimizer"]["state"].items()),
@@ -171,22 +173,41 @@ def test_resume_refuses_other_view(tmp_path):
         run(cfg, tmp_path / "x")
 
 
-def test_report_eval_ships_the_best_checkpoint_by_held_out_success(tmp_path):
-    """`report eval --ship` evaluates every seed on the same held-out episodes and copies the best one."""
+def test_report_eval_ships_the_best_checkpoint_by_held_out_success(tmp_path, capsys):
+    """`report eval --ship` evaluates every seed on the same held-out episodes and copies the best one; only
+    finished runs of the experiment's budget, on the full held-out episode count."""
+    from omegaconf import OmegaConf
+
     from flownav.algorithms import report
     from flownav.checkpoint import save_policy_checkpoint
     from flownav.evaluation.scripted import HeadToTarget, Passive, fit_expert
 
+    overrides = [o for o in TINY if o.startswith(("flow", "task", "env."))]
+    config = OmegaConf.to_container(make_cfg(), resolve=True)  # the teacher experiment at its full budget
     paths = []
     for name, expert in (("drifts", Passive()), ("swims", HeadToTarget())):
         policy, _ = fit_expert(expert, hidden=(32, 32), steps=400, batch=512, seed=0)
-        paths.append(str(save_policy_checkpoint(tmp_path / f"{name}.pt", policy, "geo", "teacher")))
-    overrides = [o for o in TINY if o.startswith(("flow", "task", "env."))]
-    args = ["eval", "--name", "t", "--out", str(tmp_path / "t.json"), "--episodes", "64", "--threads", "1"]
-    args += [a for o in overrides for a in ("--override", o)] + ["--ship", str(tmp_path / "shipped.pt"), *paths]
-    report.main(args)
+        finished = {"frames": config["algo"]["total_frames"]}
+        meta = {"config": config}
+        paths.append(str(save_policy_checkpoint(tmp_path / f"{name}.pt", policy, "geo", "teacher", meta, finished)))
+    args = ["eval", "--name", "t", "--out", str(tmp_path / "t.json"), "--threads", "1"]
+    args += [a for o in overrides for a in ("--override", o)] + ["--ship", str(tmp_path / "shipped.pt")]
+
+    with pytest.raises(SystemExit, match=r"^error: --episodes 64 is below the 10000 a shipped result needs"):
+        report.main([*args, "--episodes", "64", *paths])
+    unfinished = dict(config, algo=dict(config["algo"], total_frames=4096))
+    policy, _ = fit_expert(Passive(), hidden=(8,), steps=1, batch=8, seed=0)
+    short = save_policy_checkpoint(
+        tmp_path / "short.pt", policy, "geo", "teacher", {"config": unfinished}, {"frames": 4096}
+    )
+    with pytest.raises(SystemExit, match=r"algo\.total_frames=4096 is below experiment teacher's 45000000"):
+        report.main([*args, *paths, str(short)])
+    assert not (tmp_path / "shipped.pt").exists() and not (tmp_path / "t.json").exists()
+
+    report.main([*args, *paths])
     out = json.loads((tmp_path / "t.json").read_text())
     rates = [r["success_rate"] for r in out["runs"]]
-    assert rates[0] == 0.0 and rates[1] > 0.5
+    assert rates[0] == 0.0 and rates[1] > 0.5 and out["runs"][0]["episodes"] == 10_000
     assert out["shipped"]["checkpoint"] == paths[1]
-    assert (tmp_path / "shipped.pt").read_bytes() == Path(paths[1]).read_bytes()
+    shipped, best = load_checkpoint(tmp_path / "shipped.pt"), load_checkpoint(paths[1])
+    assert all(torch.equal(shipped["policy"]["state_dict"][k], v) for k, v in best["policy"]["state_dict"].items())

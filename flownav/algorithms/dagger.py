@@ -18,9 +18,9 @@ One iteration, read top to bottom in :func:`train`:
 Logged per iteration (``metrics.csv``, wandb): ``train/loss`` (eq. 9, mean over the iteration's
 updates), ``train/loss_onpolicy`` (eq. 9 of the student on the states it just visited, before fitting:
 the error DAgger exists to drive down), the success rate of the episodes that ended during collection,
-beta, buffer size. Checkpoints (``<run>/checkpoints/last.pt``, atomic) carry the optimiser, RNG state,
-counters; the aggregated data is saved next to it (``buffer.pt``, atomic), so ``resume=<run dir>``
-continues exactly where the run stopped.
+beta, buffer size. A checkpoint (``<run>/checkpoints/last.pt``, one atomic file) carries the optimiser, RNG
+states, counters and the filled part of the aggregated data, so ``resume=<run dir>`` continues exactly where
+the run stopped. The run's record (final metrics, loss curve) is ``<run>/results.json``.
 """
 
 from __future__ import annotations
@@ -37,15 +37,16 @@ from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.data.replay_buffers.samplers import RandomSampler
 
 from flownav.agents.networks import DeterministicPolicy
-from flownav.atomic import atomic_copy, atomic_write_text
+from flownav.algorithms.common import require_finite_update
+from flownav.atomic import atomic_write_text
 from flownav.builders import ConfigError, build_env, build_flow, build_task
 from flownav.checkpoint import (
     CheckpointError,
-    atomic_torch_save,
     load_policy,
     load_resume_checkpoint,
-    safe_torch_load,
+    restore_training_state,
     save_policy_checkpoint,
+    training_state,
 )
 from flownav.devices import check_on_device, resolve_device
 from flownav.envs.observations import GEO_VIEWS, observation_size
@@ -54,6 +55,24 @@ from flownav.paths import resolve
 from flownav.runlog import RunLogger, run_summary
 
 STUDENT_VIEWS = ("ego", "ego_flow", "ego_up", "ego_mem", "geo", "geo_flow")
+RESUME_NEEDS = ("buffer", "history")  # DAgger's own entries of last.pt's train_state
+NON_FINITE_FIX = "check algo.lr, algo.grad_clip and algo.weight_decay"
+
+
+def buffer_contents(buffer) -> dict:
+    """The filled part of the buffer, in storage order (what a checkpoint keeps of it)."""
+    return buffer[:].to_dict() if len(buffer) else {}
+
+
+def refill_buffer(buffer, contents: dict, frames: int) -> None:
+    """Rebuild a saved buffer in an empty one: the same pairs at the same storage positions, and the writer's
+    cursor where ``frames`` pairs written round robin leave it, so the run samples exactly what it would have."""
+    if not contents:
+        return
+    data = TensorDict(contents, batch_size=[len(next(iter(contents.values())))])
+    buffer.extend(data)
+    if frames > len(data):  # the FIFO had wrapped: rewrite the first pairs to move the cursor past them
+        buffer.extend(data[: frames % len(data)])
 
 
 def imitation_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -172,34 +191,20 @@ def train(cfg, run_dir) -> dict:
     ckpt_dir = run_dir / "checkpoints"
     iteration, frames, wall_offset, history = 0, 0, 0.0, []
     if cfg.get("resume"):
-        path, payload = load_resume_checkpoint(cfg.resume, expect_obs=student_view)
-        st = payload["train_state"]
-        student.load_state_dict(payload["policy"]["state_dict"])
-        optim.load_state_dict(st["optimizer"])
-        buf_path = path.parent / st["buffer_file"]
-        if not buf_path.is_file():
-            raise ConfigError(f"resume={cfg.resume}: {buf_path} (the aggregated data) is missing")
-        buffer.load_state_dict(safe_torch_load(buf_path))
+        _, payload = load_resume_checkpoint(cfg.resume, expect_obs=student_view, needs=RESUME_NEEDS)
+        st = restore_training_state(payload, student, optim, env)
         iteration, frames, wall_offset = int(st["iteration"]), int(st["frames"]), float(st["wall_time"])
-        history = list(st.get("history", []))
-        torch.set_rng_state(st["rng"]["torch"])
-        env.rng.set_state(st["rng"]["env"])
+        refill_buffer(buffer, st["buffer"], frames)
+        history = list(st["history"])
         gen.set_state(st["rng"]["beta"])
 
     check_on_device(device, student=student, teacher=teacher, env=env)
     logger = RunLogger(run_dir, cfg, total=iterations, start=iteration, wall_offset=wall_offset)
 
     def save(name: str, metrics: dict) -> Path:
-        atomic_torch_save(buffer.state_dict(), ckpt_dir / "buffer.pt")
-        train_state = {
-            "iteration": iteration,
-            "frames": frames,
-            "wall_time": logger.elapsed,
-            "optimizer": optim.state_dict(),
-            "rng": {"torch": torch.get_rng_state(), "env": env.rng.get_state(), "beta": gen.get_state()},
-            "buffer_file": "buffer.pt",
-            "history": history,
-        }
+        counters = {"iteration": iteration, "frames": frames, "wall_time": logger.elapsed}
+        train_state = training_state(env, optim, counters, buffer=buffer_contents(buffer), history=history)
+        train_state["rng"]["beta"] = gen.get_state()
         meta = {
             "config": OmegaConf.to_container(cfg, resolve=True),
             "iteration": iteration,
@@ -238,6 +243,7 @@ def train(cfg, run_dir) -> dict:
             optim.step()
             total += float(loss.detach())
         iteration += 1
+        require_finite_update("DAgger", iteration, {"train/loss": total}, student, ckpt_dir / "last.pt", NON_FINITE_FIX)
         metrics = {
             "iteration": iteration,
             "train/loss": total / updates,
@@ -275,27 +281,20 @@ def train(cfg, run_dir) -> dict:
     logger.summary(final)
     logger.log_checkpoint(ckpt_dir / "last.pt")
     logger.close()
-    if a.get("results_json"):
-        path = resolve(str(a.results_json))
-        path.parent.mkdir(parents=True, exist_ok=True)
-        curve = [
-            {k: h[k] for k in ("iteration", "train/loss", "train/loss_onpolicy", "train/success_rate")} for h in history
-        ]
-        record = {
-            "run_dir": str(run_dir),
-            "teacher_checkpoint": str(cfg.teacher_checkpoint),
-            "seed": seed,
-            "final": final,
-            "curve": curve,
-        }
-        atomic_write_text(path, json.dumps(record, indent=1, default=str))
-    if cfg.get("output_checkpoint"):
-        out = atomic_copy(ckpt_dir / "last.pt", resolve(str(cfg.output_checkpoint)))
-        final["output_checkpoint"] = str(out)
+    curve = [
+        {k: h[k] for k in ("iteration", "train/loss", "train/loss_onpolicy", "train/success_rate")} for h in history
+    ]
+    record = {
+        "run_dir": str(run_dir),
+        "teacher_checkpoint": str(cfg.teacher_checkpoint),
+        "seed": seed,
+        "final": final,
+        "curve": curve,
+    }
+    atomic_write_text(run_dir / "results.json", json.dumps(record, indent=1, default=str))  # shipped by ship=true
     held_out = {
         f"held-out {name} success": (final.get(f"eval/{name}_success_rate"), eval_episodes)
         for name in ("student", "teacher")
     }
-    ckpts = {"last": ckpt_dir / "last.pt", "copied to": final.get("output_checkpoint")}
-    logger.write_summary(run_summary(frames, logger.elapsed, held_out, {k: v for k, v in ckpts.items() if v}))
+    logger.write_summary(run_summary(frames, logger.elapsed, held_out, {"last": ckpt_dir / "last.pt"}))
     return final

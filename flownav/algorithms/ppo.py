@@ -32,19 +32,27 @@ from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
 from flownav.agents.networks import DeterministicPolicy, ObsNormalizer, check_mlp_size, mlp
-from flownav.atomic import atomic_copy
+from flownav.algorithms.common import require_finite_update
 from flownav.builders import ConfigError, build_env, build_flow, build_task
-from flownav.checkpoint import load_checkpoint, load_resume_checkpoint, save_policy_checkpoint
+from flownav.checkpoint import (
+    load_checkpoint,
+    load_resume_checkpoint,
+    restore_training_state,
+    save_policy_checkpoint,
+    training_state,
+)
 from flownav.devices import check_on_device, resolve_device
-from flownav.envs.navigation import NavigationEnv, Status
+from flownav.envs.navigation import Status
 from flownav.envs.observations import GEO_VIEWS, observation_size
 from flownav.episode_window import EpisodeWindow
 from flownav.evaluation.rollout import run_episodes
-from flownav.paths import resolve
 from flownav.runlog import RunLogger, run_summary
 from flownav.viz.dashboard import eval_trajectories_figure
 
 LOSS_CRITIC_TYPES = ("l1", "l2", "smooth_l1")
+RESUME_NEEDS = ("critic", "window", "sampler")  # PPO's own entries of last.pt's train_state
+NON_FINITE_FIX = "check env.reward, algo.lr, algo.max_grad_norm and the flow"
+CHECKED_LOSSES = ("loss/objective", "loss/critic", "loss/grad_norm")  # the first columns of each update's losses
 
 
 # ----------------------------------------------------------------------------- networks
@@ -140,32 +148,6 @@ def evaluate_policy(policy, make_env, obs_key: str, episodes: int, chunk: int = 
     return out
 
 
-# ----------------------------------------------------------------------------- checkpoints
-def _rng_state(env: NavigationEnv) -> dict:
-    return {"torch": torch.get_rng_state(), "env": env.rng.get_state()}
-
-
-def restore_train_state(payload: dict, policy, critic_net, optim, env: NavigationEnv):
-    """Load policy (normaliser included), critic, optimiser and RNG states; return the counters."""
-    st = payload.get("train_state")
-    if not st or "optimizer" not in st:
-        raise ConfigError(
-            "that checkpoint holds no PPO training state (a shipped policy?); resume from a run's last.pt"
-        )
-    policy.load_state_dict(payload["policy"]["state_dict"])
-    critic_net.load_state_dict(st["critic"])
-    optim.load_state_dict(st["optimizer"])
-    torch.set_rng_state(st["rng"]["torch"])
-    env.rng.set_state(st["rng"]["env"])
-    return (
-        int(st["frames"]),
-        int(st["iteration"]),
-        float(st["wall_time"]),
-        float(st.get("best_success", -1.0)),
-        dict(st.get("best_metrics", {})),
-    )
-
-
 # ----------------------------------------------------------------------------- training
 def train(cfg, run_dir) -> dict:
     run_dir = Path(run_dir)
@@ -224,11 +206,12 @@ def train(cfg, run_dir) -> dict:
     ckpt_dir = run_dir / "checkpoints"
     frames, iteration, wall_offset, best_success = 0, 0, 0.0, -1.0
     history_best = {}
+    window = EpisodeWindow(num_envs, device)  # outcomes of the episodes that end between log rows
+    time_to_target = None
+    resumed = None
     if cfg.resume:
-        path, payload = load_resume_checkpoint(cfg.resume, expect_obs=obs_key)
-        frames, iteration, wall_offset, best_success, history_best = restore_train_state(
-            payload, policy, critic_net, optim, env
-        )
+        _, resumed = load_resume_checkpoint(cfg.resume, expect_obs=obs_key, needs=RESUME_NEEDS)
+        critic_net.load_state_dict(resumed["train_state"]["critic"])
     elif a.get("init_from"):
         # Warm start: weights, normalisers (and optimiser moments) from another run; counters from zero.
         payload = load_checkpoint(str(a.init_from))
@@ -252,20 +235,33 @@ def train(cfg, run_dir) -> dict:
     )
     if collector.policy is not actor:  # a copy would only see weights, not the normaliser buffers
         raise RuntimeError("the collector copied the actor; PPO needs it to step the live policy")
+    if resumed is not None:
+        # After the collector is built (it resets the env): the env's swimmers, episodes in flight and RNG as
+        # saved, and the collector's carried observation made from them, so the next batch is the one the
+        # uninterrupted run collects.
+        st = restore_training_state(resumed, policy, optim, env)
+        collector.reset(keep_state=True)
+        frames, iteration, wall_offset = int(st["frames"]), int(st["iteration"]), float(st["wall_time"])
+        best_success, history_best = float(st["best_success"]), dict(st["best_metrics"])
+        window.load_state_dict(st["window"])
+        time_to_target = st["time_to_target"]
+        buffer.sampler.load_state_dict(st["sampler"])
     check_on_device(device, actor=actor, critic=critic, env=env)
     logger = RunLogger(run_dir, cfg, total=total_frames, start=frames, wall_offset=wall_offset)
 
     def save(name: str, metrics: dict) -> Path:
-        train_state = {
-            "frames": frames,
-            "iteration": iteration,
-            "wall_time": logger.elapsed,
-            "critic": critic_net.state_dict(),
-            "optimizer": optim.state_dict(),
-            "rng": _rng_state(env),
-            "best_success": best_success,
-            "best_metrics": history_best,
-        }
+        counters = {"frames": frames, "iteration": iteration, "wall_time": logger.elapsed}
+        train_state = training_state(
+            env,
+            optim,
+            counters,
+            critic=critic_net.state_dict(),
+            best_success=best_success,
+            best_metrics=history_best,
+            window=window.state_dict(),
+            time_to_target=time_to_target,
+            sampler=buffer.sampler.state_dict(),
+        )
         meta = {
             "config": OmegaConf.to_container(cfg, resolve=True),
             "frames": frames,
@@ -291,9 +287,7 @@ def train(cfg, run_dir) -> dict:
             logger.log_figure(figure_step, "eval/trajectories", eval_trajectories_figure(res.pop("trajectories"), flow))
         return res
 
-    window = EpisodeWindow(num_envs, device)  # outcomes of the episodes that end between log rows
     t_start, frames_at_start = time.time(), frames
-    time_to_target = None
     metrics: dict = {}
     collector_iter = iter(collector)
     try:
@@ -342,6 +336,8 @@ def train(cfg, run_dir) -> dict:
             if normalize_online:
                 policy.normalizer.update(data[obs_key])
                 critic_net.normalizer.update(data[critic_key])
+            checked = dict(zip(CHECKED_LOSSES, torch.stack(losses)[:, :3].T, strict=True))
+            require_finite_update("PPO", iteration, checked, loss_module, ckpt_dir / "last.pt", NON_FINITE_FIX)
             collector.update_policy_weights_()
             t_train = time.time() - t_train
 
@@ -408,12 +404,9 @@ def train(cfg, run_dir) -> dict:
     logger.summary(final)
     logger.log_checkpoint(ckpt_dir / "best.pt")
     logger.close()
-    if cfg.get("output_checkpoint"):
-        out = atomic_copy(ckpt_dir / "last.pt", resolve(str(cfg.output_checkpoint)))
-        final["output_checkpoint"] = str(out)
     # End-of-run summary: the final evaluation's success, else the last periodic evaluation's.
     n_held_out = int(final.get("eval/episodes") or (periodic_eval_episodes if "eval/success_rate" in final else 0))
     held_out = {"held-out success": (final.get("eval/success_rate"), n_held_out)}
-    ckpts = {"last": ckpt_dir / "last.pt", "best": ckpt_dir / "best.pt", "copied to": final.get("output_checkpoint")}
-    logger.write_summary(run_summary(frames, logger.elapsed, held_out, {k: v for k, v in ckpts.items() if v}))
+    ckpts = {"last": ckpt_dir / "last.pt", "best": ckpt_dir / "best.pt"}
+    logger.write_summary(run_summary(frames, logger.elapsed, held_out, ckpts))
     return final

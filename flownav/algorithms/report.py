@@ -3,7 +3,8 @@
     # success on 10,000 held-out episodes of the training task, one entry per checkpoint
     python -m flownav.algorithms.report eval --name teacher --out results/teacher.json \\
         multirun/teacher/<date>/seed*/checkpoints/last.pt
-    # the same, and ship the best of them (by this held-out success) to checkpoints/, atomically
+    # the same, and ship the best of them (by this held-out success) to checkpoints/, atomically: only
+    # finished runs of the experiment's full budget, scored on the full --episodes (flownav/shipping.py)
     python -m flownav.algorithms.report eval --name teacher --out results/teacher.json \\
         --ship checkpoints/teacher.pt multirun/teacher/<date>/seed*/checkpoints/last.pt
     # mean +- std of the training reward over seeds (paper Fig. 2b), teacher and baseline
@@ -29,10 +30,11 @@ from pathlib import Path
 
 import torch
 
-from flownav.atomic import atomic_copy, atomic_write_text
+from flownav.atomic import atomic_write_text
 from flownav.paths import REPO_ROOT
 
 EVAL_SEED = 1_000_003  # held-out: training seeds are small integers
+EPISODES = 10_000  # held-out episodes per checkpoint; shipping needs at least these
 
 
 def compose_config(overrides=()):
@@ -78,6 +80,18 @@ def _mean_std(xs):
 
 
 def cmd_eval(args) -> dict:
+    from flownav.builders import ConfigError
+    from flownav.checkpoint import load_checkpoint, ship_checkpoint
+    from flownav.shipping import is_shipped, require_shippable
+
+    if args.ship or is_shipped(args.out):  # refused before the (long) evaluation
+        if args.episodes < EPISODES:
+            raise ConfigError(
+                f"--episodes {args.episodes} is below the {EPISODES} a shipped result needs; drop --ship "
+                "(and write --out outside results/) for a try"
+            )
+        for p in args.checkpoints:
+            require_shippable(load_checkpoint(p), p)
     torch.set_num_threads(args.threads)
     runs = [evaluate_checkpoint(p, args.episodes, args.override, args.chunk) for p in args.checkpoints]
     m, s = _mean_std([r["success_rate"] for r in runs])
@@ -99,7 +113,7 @@ def cmd_eval(args) -> dict:
     }
     if args.ship:  # the rule for every shipped policy: the best seed by held-out success
         best = max(runs, key=lambda r: r["success_rate"])
-        atomic_copy(best["checkpoint"], args.ship)
+        ship_checkpoint(best["checkpoint"], args.ship)
         out["shipped"] = {"checkpoint": best["checkpoint"], "to": args.ship, "success_rate": best["success_rate"]}
         print(f"shipped {best['checkpoint']} ({best['success_rate']:.4f}) -> {args.ship}")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
@@ -158,7 +172,7 @@ def main(argv=None):
     e.add_argument("checkpoints", nargs="+")
     e.add_argument("--name", required=True)
     e.add_argument("--out", required=True)
-    e.add_argument("--episodes", type=int, default=10_000)
+    e.add_argument("--episodes", type=int, default=EPISODES)
     e.add_argument("--chunk", type=int, default=10_000, help="episodes stepped together")
     e.add_argument("--override", action="append", default=[], help="Hydra override, e.g. flow=vortex_street")
     e.add_argument("--threads", type=int, default=2)
@@ -169,7 +183,13 @@ def main(argv=None):
     c.add_argument("--out", default="results/figures/reward_curves.png")
     args = p.parse_args(argv)
     if args.cmd == "eval":
-        cmd_eval(args)
+        from flownav.builders import ConfigError
+        from flownav.checkpoint import CheckpointError
+
+        try:
+            cmd_eval(args)
+        except (ConfigError, CheckpointError) as e:  # a bad argument: one line, no traceback
+            sys.exit(f"error: {e}")
     else:
         args.group = [(g[0], g[1:]) for g in args.group]
         args.key = args.key or ["train/episode_reward", "train/success_rate"]

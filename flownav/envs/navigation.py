@@ -36,12 +36,14 @@ from flownav.envs.observations import (
 )
 from flownav.envs.reward import RewardConfig, step_reward
 from flownav.envs.tasks import RegionTask
+from flownav.errors import require_finite
 from flownav.flows.base import FlowField
 from flownav.flows.transforms import RotatedFlow, rotate_z
 
 # Action bounds of the paper (section 2.3.2): U in [0, U_max], dtheta, dpsi in rad per time unit.
 DTHETA_MAX = math.pi / 4
 DPSI_MAX = math.pi / 2
+FLOW_FIX = "the flow must be finite over the whole domain (a FunctionFlow's function, a dataset's frames)"
 
 
 class Status(IntEnum):
@@ -180,6 +182,27 @@ class NavigationEnv(EnvBase):
     def _set_seed(self, seed: int | None):
         self.rng.manual_seed(int(seed) if seed is not None else 0)
 
+    # ----------------------------------------------------------------- exact resume
+    STATE = ("pos", "target", "vel", "flow_vel", "theta", "psi", "time", "t0", "strength", "start_dist", "dist",
+             "speed", "status", "steps", "flow_ring", "ring_ptr")  # fmt: skip
+
+    def state_dict(self) -> dict:
+        """Everything a step depends on: the swimmers' state, the memory ring and its pointer, the RNG."""
+        state = {k: getattr(self, k) for k in self.STATE}
+        return state | {"num_envs": self.num_envs, "rng": self.rng.get_state()}
+
+    def load_state_dict(self, state: dict) -> None:
+        """Continue exactly where :meth:`state_dict` was taken (an env built with the same settings)."""
+        if state["num_envs"] != self.num_envs or state["flow_ring"].shape != self.flow_ring.shape:
+            raise ValueError(
+                f"the saved env state has {state['num_envs']} swimmers and a memory ring of "
+                f"{tuple(state['flow_ring'].shape)}; this env has {self.num_envs} and {tuple(self.flow_ring.shape)}"
+            )
+        for k in self.STATE:
+            v = state[k]
+            setattr(self, k, v.to(self.device).clone() if torch.is_tensor(v) else v)
+        self.rng.set_state(state["rng"])
+
     # ----------------------------------------------------------------- sampling
     def _sample_episodes(self, n: int):
         """Starts, targets and headings for n new episodes, in the (possibly rotated) scene."""
@@ -228,7 +251,9 @@ class NavigationEnv(EnvBase):
         return u * s[:, None]
 
     # ----------------------------------------------------------------- TorchRL API
-    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
+    def _reset(self, tensordict: TensorDictBase | None = None, keep_state: bool = False, **kwargs) -> TensorDictBase:
+        if keep_state:  # the observation of the current (e.g. just restored) state, no new episodes
+            return self._observe().update(self._not_done())
         mask = None
         if tensordict is not None and "_reset" in tensordict.keys():
             mask = tensordict.get("_reset").reshape(self.num_envs)
@@ -240,6 +265,7 @@ class NavigationEnv(EnvBase):
             if strength is not None:
                 self.strength = put(self.strength, strength)
             flow_vel = self._flow_at(start, t0, idx)
+            require_finite(flow_vel, "the flow velocity at the start", FLOW_FIX, start)
             d = (target - start).norm(dim=-1)
             zero = torch.zeros_like(d)
             self.pos, self.target, self.theta, self.psi = (
@@ -260,13 +286,15 @@ class NavigationEnv(EnvBase):
             self.start_dist, self.dist = put(self.start_dist, d), put(self.dist, d)
             if self._memory:  # no past yet: the swimmer has been sensing its start flow
                 self.flow_ring[idx] = flow_vel[:, None, :]
-        out = self._observe()
+        return self._observe().update(self._not_done())
+
+    def _not_done(self) -> dict:
         false = torch.zeros(self.num_envs, 1, dtype=torch.bool, device=self.device)
-        out.update({"done": false, "terminated": false.clone(), "truncated": false.clone()})
-        return out
+        return {"done": false, "terminated": false.clone(), "truncated": false.clone()}
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = tensordict.get("action")
+        require_finite(action, "the action", "the policy produced it: check its weights and observations")
         low, high = self.action_spec.space.low, self.action_spec.space.high
         action = torch.max(torch.min(action, high), low)
         speed, dtheta, dpsi = action.unbind(-1)
@@ -277,6 +305,7 @@ class NavigationEnv(EnvBase):
         self.steps = self.steps + 1
         self.time = self.steps * self.dt
         self.flow_vel = self._flow_at(self.pos, self.t0 + self.time)
+        require_finite(self.flow_vel, "the flow velocity", FLOW_FIX, self.pos)
         self.vel = swim + self.flow_vel
         if self._memory:
             self.ring_ptr = (self.ring_ptr + 1) % self.flow_ring.shape[1]
@@ -296,6 +325,7 @@ class NavigationEnv(EnvBase):
         terminated = (success | left | hit)[:, None]
         truncated = timeout[:, None] & ~terminated
         reward = step_reward(self.reward_cfg, prev_dist, self.dist, self.start_dist, success, self.dt)
+        require_finite(reward, "the reward", "check env.reward (alpha, success_bonus, time_penalty, ...)")
         out = self._observe()
         out.update(
             {

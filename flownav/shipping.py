@@ -1,0 +1,109 @@
+"""Shipped files (checkpoints/, results/, REPORT.md, data/) change only by an explicit, named action.
+
+Every run writes into its own run directory. ``ship=true`` (train.py, evaluate.py), an explicit
+``report=`` / ``results=`` path (evaluate.py) or ``python -m flownav.algorithms.report eval --ship`` (the
+best of several seeds) copies a result to a shipped place, and only a result of the full budget: a run
+whose training budget is below its experiment's, or an evaluation with fewer episodes, is refused.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from omegaconf import OmegaConf
+
+from flownav.atomic import atomic_copy
+from flownav.builders import ConfigError
+from flownav.checkpoint import load_checkpoint, ship_checkpoint
+from flownav.paths import CHECKPOINT_DIR, DATA_DIR, REPO_ROOT, RESULTS_DIR, resolve
+
+SHIPPED = (CHECKPOINT_DIR, RESULTS_DIR, REPO_ROOT / "REPORT.md", DATA_DIR)
+CONF = REPO_ROOT / "conf"
+
+# The settings that make a training run's budget (steps, data, updates, evaluation episodes), per algorithm.
+BUDGET = {
+    "ppo": ("total_frames", "final_eval_episodes"),
+    "dagger": ("iterations", "num_envs", "steps_per_iteration", "updates_per_iteration", "final_eval_episodes"),
+}
+# The counter of last.pt's train_state that says how far a run got, and the setting it must reach.
+PROGRESS = {"ppo": ("frames", "total_frames"), "dagger": ("iteration", "iterations")}
+
+
+def is_shipped(path) -> bool:
+    """True for a path in checkpoints/, results/ or data/, or REPORT.md, of this repository."""
+    p = resolve(str(path)).resolve()
+    return any(p == s or s in p.parents for s in SHIPPED)
+
+
+def experiment_budget(name: str, algo: str) -> dict:
+    """The budget settings of ``conf/experiment/<name>.yaml`` (its own values over its algo group's)."""
+    exp_file = CONF / "experiment" / f"{name}.yaml"
+    if not exp_file.is_file():
+        raise ConfigError(
+            f"ship=true needs a run of an experiment (name={name} has no conf/experiment/{name}.yaml); "
+            "run python train.py +experiment=<name> ship=true"
+        )
+    base = OmegaConf.load(CONF / "algo" / f"{algo}.yaml")
+    own = OmegaConf.load(exp_file).get("algo") or {}
+    return {k: own.get(k, base.get(k)) for k in BUDGET[algo]}
+
+
+def require_full_budget(cfg) -> None:
+    """Refuse (one line, naming the key) a run whose budget is below its experiment's."""
+    algo = str(cfg["algo"]["name"])
+    for key, full in experiment_budget(str(cfg["name"]), algo).items():
+        if full is not None and float(cfg["algo"][key]) < float(full):
+            raise ConfigError(
+                f"shipping refused: algo.{key}={cfg['algo'][key]} is below experiment {cfg['name']}'s {full} "
+                "(a partial budget); drop ship=true for a try, or train with the experiment's budget"
+            )
+
+
+def require_shippable(payload: dict, what) -> None:
+    """Refuse the checkpoint of a run that stopped before its budget (interrupted, resumed but unfinished) or
+    whose budget is below its experiment's."""
+    cfg = payload.get("meta", {}).get("config") or {}
+    algo = (cfg.get("algo") or {}).get("name")
+    st = payload.get("train_state") or {}
+    if algo not in PROGRESS:
+        raise ConfigError(f"{what} is not the checkpoint of a training run (no training config in it); cannot ship it")
+    counter, setting = PROGRESS[algo]
+    done, budget = int(st.get(counter, 0)), int(float(cfg["algo"][setting]))
+    if done < budget:
+        raise ConfigError(
+            f"{what} stopped at {counter} {done} of algo.{setting}={budget} (an unfinished run); "
+            "resume it to the end (resume=<run dir>) before shipping"
+        )
+    require_full_budget(cfg)
+
+
+def train_targets(cfg, multirun: bool) -> dict:
+    """Where ``ship=true`` will copy this run's results, checked before the run starts; {} without ship."""
+    if not cfg.get("ship"):
+        return {}
+    targets = {"checkpoint": cfg.get("output_checkpoint"), "results": cfg.algo.get("results_json")}
+    targets = {k: str(v) for k, v in targets.items() if v}
+    if not targets:
+        raise ConfigError(
+            "ship=true but this run names nothing to ship (output_checkpoint, algo.results_json are null); "
+            "set output_checkpoint=<path> or drop ship=true"
+        )
+    if multirun:
+        raise ConfigError(
+            "ship=true in a -m sweep: the seeds would race for one file; drop ship=true and ship the best seed "
+            "with python -m flownav.algorithms.report eval --ship <path> <run>/checkpoints/last.pt ..."
+        )
+    require_full_budget(cfg)
+    return targets
+
+
+def ship_run(run_dir: Path, targets: dict) -> dict:
+    """Copy a finished run's policy and results record to the shipped places named by ``targets``."""
+    last = Path(run_dir) / "checkpoints" / "last.pt"
+    require_shippable(load_checkpoint(last), last)
+    shipped = {}
+    if "checkpoint" in targets:
+        shipped["checkpoint"] = str(ship_checkpoint(last, resolve(targets["checkpoint"])))
+    if "results" in targets:
+        shipped["results"] = str(atomic_copy(Path(run_dir) / "results.json", resolve(targets["results"])))
+    return shipped

@@ -1,0 +1,361 @@
+"""Faults: non-finite values stop with a named error and never reach a checkpoint; a run interrupted mid-way
+resumes bit for bit; quick tries and refused resumes leave shipped files and other directories untouched."""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+
+from flownav.builders import ConfigError
+from flownav.checkpoint import load_checkpoint, save_policy_checkpoint
+from flownav.envs import NavigationEnv, RegionTask
+from flownav.envs.reward import RewardConfig
+from flownav.errors import NonFiniteError
+from flownav.flows import Box, FunctionFlow, UniformFlow
+
+ROOT = Path(__file__).resolve().parents[1]
+CONF = str(ROOT / "conf")
+TASK = RegionTask(Box((5.0, 0.0, 5.0), (6.0, 1.0, 6.0)), Box((7.0, 0.0, 5.0), (8.0, 1.0, 6.0)))
+QUIET = ["logger=csv", "logger.progress=false", "threads=1"]
+# PPO on the analytic wake: episodes (60 steps) span several batches (16 steps), the flow's phase is random.
+PPO_TINY = [
+    "+experiment=teacher",
+    "flow=vortex_street",
+    "env.num_envs=128",
+    "env.dt=0.5",
+    "env.time_limit=30.0",
+    "algo.rollout_steps=16",
+    "algo.epochs=2",
+    "algo.minibatch_size=512",
+    "algo.actor.hidden=[32,32]",
+    "algo.critic.hidden=[32,32]",
+    "algo.final_eval_episodes=0",
+    "algo.eval_every=0",
+    "checkpoint_every=1",
+    *QUIET,
+]
+
+
+def compose_train(*overrides):
+    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
+        return compose("config", overrides=list(overrides))
+
+
+def tree_digest(*paths: Path) -> dict:
+    """sha256 of every file under the given paths (what must stay byte-identical)."""
+    out = {}
+    for root in paths:
+        for f in sorted([root] if root.is_file() else root.rglob("*")):
+            if f.is_file():
+                out[str(f)] = hashlib.sha256(f.read_bytes()).hexdigest()
+    return out
+
+
+SHIPPED = (ROOT / "checkpoints", ROOT / "results", ROOT / "REPORT.md")
+
+
+@pytest.fixture(scope="module")
+def teacher_ckpt(tmp_path_factory):
+    from flownav.evaluation.scripted import HeadToTarget, fit_expert
+
+    policy, _ = fit_expert(HeadToTarget(), hidden=(32, 32), steps=300, batch=512, seed=0)
+    path = tmp_path_factory.mktemp("teacher") / "teacher.pt"
+    save_policy_checkpoint(path, policy, "geo", "teacher")
+    return path
+
+
+def dagger_cfg(teacher, *overrides):
+    return compose_train(
+        "+experiment=student",
+        "flow=uniform",
+        "flow.velocity=[0.1,0.0,0.0]",
+        "task.start=[[5.0,0.0,5.0],[6.0,1.0,6.0]]",
+        "task.target=[[7.0,0.0,5.0],[8.0,1.0,6.0]]",
+        "env.time_limit=20.0",
+        "algo.num_envs=32",
+        "algo.steps_per_iteration=20",
+        "algo.updates_per_iteration=10",
+        "algo.batch_size=128",
+        "algo.buffer_capacity=1500",  # smaller than the 5 x 640 pairs: the FIFO wraps before the interruption
+        "algo.hidden=[32,32]",
+        "algo.final_eval_episodes=0",
+        "checkpoint_every=1",
+        f"teacher_checkpoint={teacher}",
+        *QUIET,
+        *overrides,
+    )
+
+
+# ----------------------------------------------------------------------------- non-finite values
+
+def bypass_validation(monkeypatch, trainer) -> None:
+    """Switch off the up-front config checks (the trainer's and the schema's) so a bad value reaches the run."""
+    from flownav import schema
+
+    monkeypatch.setattr(trainer, "check_config", lambda cfg: None)
+    for name in ("check_flow", "check_task", "check_env"):
+        monkeypatch.setattr(schema, name, lambda *args, **kwargs: None)
+
+def test_nan_action_is_refused_by_name(wake_like_flow):
+    env = NavigationEnv(wake_like_flow, num_envs=8, views=("geo",))
+    td = env.reset()
+    td["action"] = torch.full((8, 3), 0.5)
+    td["action"][3, 1] = math.nan
+    with pytest.raises(NonFiniteError, match=r"the action is not finite for 1 of 8 swimmers \(swimmer 3"):
+        env.step(td)
+
+
+def test_user_flow_with_nan_in_part_of_the_domain_is_refused():
+    def fn(pos, t):  # a user's flow, broken beyond x = 6.5
+        v = torch.zeros_like(pos)
+        v[:, 0] = torch.where(pos[:, 0] > 6.5, math.nan, 0.2)
+        return v
+
+    flow = FunctionFlow(fn, Box((0.0, -5.0, 0.0), (20.0, 5.0, 10.0)), max_speed=1.0)
+    env = NavigationEnv(flow, TASK, num_envs=16, views=("geo",), dt=0.5)
+    td = env.reset()
+    first_bad = r"flow velocity is not finite for \d+ of 16 swimmers \(swimmer \d+ at position \[6\.[5-9]"
+    with pytest.raises(NonFiniteError, match=first_bad):
+        for _ in range(20):  # swim towards x = 7..8: the first swimmer past x = 6.5 stops the run
+            td["action"] = torch.tensor([[1.0, 0.0, 0.0]]).expand(16, 3).clone()
+            td = env.step(td)["next"]
+
+
+def test_non_finite_reward_is_refused():
+    env = NavigationEnv(
+        UniformFlow((0.0, 0.0, 0.0)), TASK, num_envs=4, views=("geo",), reward=RewardConfig(alpha=math.nan)
+    )
+    td = env.reset()
+    td["action"] = torch.full((4, 3), 0.5)
+    with pytest.raises(NonFiniteError, match=r"the reward is not finite for 4 of 4 .*env\.reward"):
+        env.step(td)
+
+
+def test_ppo_stops_on_a_non_finite_reward_and_writes_no_checkpoint(tmp_path, monkeypatch):
+    from flownav.algorithms import ppo
+
+    bypass_validation(monkeypatch, ppo)  # as a bug would
+    cfg = compose_train(*PPO_TINY, "algo.total_frames=4096", "env.reward.success_bonus=inf")
+    with pytest.raises(NonFiniteError, match="reward"):
+        ppo.train(cfg, tmp_path)
+    assert not (tmp_path / "checkpoints").exists()
+
+
+def test_ppo_stops_on_a_non_finite_optimiser_setting(tmp_path, monkeypatch):
+    from flownav.algorithms import ppo
+
+    bypass_validation(monkeypatch, ppo)
+    cfg = compose_train(*PPO_TINY, "algo.total_frames=4096", "algo.lr=inf")
+    with pytest.raises(NonFiniteError, match=r"PPO iteration 1: .* became NaN or infinite; training stopped"):
+        ppo.train(cfg, tmp_path)
+    assert not (tmp_path / "checkpoints" / "last.pt").exists()
+
+
+def test_dagger_stops_on_grad_clip_nan_and_keeps_the_last_finite_checkpoint(teacher_ckpt, tmp_path, monkeypatch):
+    import train
+    from flownav.algorithms import dagger
+
+    train.run(dagger_cfg(teacher_ckpt, "algo.iterations=2"), tmp_path)
+    bypass_validation(monkeypatch, dagger)
+    last = tmp_path / "checkpoints" / "last.pt"
+    before = last.read_bytes()
+    cfg = dagger_cfg(teacher_ckpt, "algo.iterations=4", "algo.grad_clip=nan", f"resume={tmp_path}")
+    with pytest.raises(
+        NonFiniteError, match=rf"DAgger iteration 3: .*\(the last finite checkpoint is {re.escape(str(last))}\)"
+    ):
+        dagger.train(cfg, tmp_path)
+    assert last.read_bytes() == before  # iteration 2, finite
+    assert load_checkpoint(last)["train_state"]["iteration"] == 2
+
+
+def test_a_non_finite_checkpoint_is_never_written(tmp_path):
+    from flownav.agents import DeterministicPolicy
+
+    policy = DeterministicPolicy(8, [0.0, -0.7, -1.5], [1.0, 0.7, 1.5], hidden=(8,))
+    with torch.no_grad():
+        policy.net[0].weight[0, 0] = math.nan
+    with pytest.raises(NonFiniteError, match=r"refusing to write .*x\.pt: policy\.state_dict\.net\.0\.weight"):
+        save_policy_checkpoint(tmp_path / "x.pt", policy, "geo", "teacher")
+    assert not any(tmp_path.iterdir())
+
+
+# ----------------------------------------------------------------------------- exact resume
+class Interrupt(RuntimeError):
+    pass
+
+
+def interrupt_at(monkeypatch, module, k):
+    """Fail the run right after the update of iteration k (before that iteration's checkpoint)."""
+    check = module.require_finite_update
+
+    def failing(trainer, iteration, *args, **kwargs):
+        check(trainer, iteration, *args, **kwargs)
+        if iteration == k:
+            raise Interrupt(f"injected failure at iteration {k}")
+
+    monkeypatch.setattr(module, "require_finite_update", failing)
+
+
+def max_weight_difference(a: Path, b: Path) -> float:
+    # weights_only: a run's whole last.pt (env state, buffer, sampler) loads without unpickling code
+    sa, sb = (torch.load(p, weights_only=True)["policy"]["state_dict"] for p in (a, b))
+    return max(float((sa[k].double() - sb[k].double()).abs().max()) for k in sa)
+
+
+def test_ppo_resumes_bit_for_bit_after_a_failure(tmp_path, monkeypatch):
+    import train
+    from flownav.algorithms import ppo
+
+    budget = "algo.total_frames=10240"  # 5 iterations of 128 x 16
+    train.run(compose_train(*PPO_TINY, budget), tmp_path / "straight")
+    with monkeypatch.context() as m:
+        interrupt_at(m, ppo, 3)
+        with pytest.raises(Interrupt):
+            train.run(compose_train(*PPO_TINY, budget), tmp_path / "part")
+    assert load_checkpoint(tmp_path / "part" / "checkpoints" / "last.pt")["train_state"]["iteration"] == 2
+    train.run(compose_train(*PPO_TINY, budget, f"resume={tmp_path / 'part'}"), tmp_path / "unused")
+    a, b = tmp_path / "straight" / "checkpoints" / "last.pt", tmp_path / "part" / "checkpoints" / "last.pt"
+    assert max_weight_difference(a, b) == 0.0
+    ca, cb = (load_checkpoint(p)["train_state"]["critic"] for p in (a, b))
+    assert all(torch.equal(ca[k], cb[k]) for k in ca)
+    assert not (tmp_path / "unused").exists()
+
+
+def test_dagger_resumes_bit_for_bit_after_a_failure(teacher_ckpt, tmp_path, monkeypatch):
+    import train
+    from flownav.algorithms import dagger
+
+    train.run(dagger_cfg(teacher_ckpt, "algo.iterations=5"), tmp_path / "straight")
+    with monkeypatch.context() as m:
+        interrupt_at(m, dagger, 4)
+        with pytest.raises(Interrupt):
+            train.run(dagger_cfg(teacher_ckpt, "algo.iterations=5"), tmp_path / "part")
+    part = load_checkpoint(tmp_path / "part" / "checkpoints" / "last.pt")["train_state"]
+    assert part["iteration"] == 3 and len(part["buffer"]["obs"]) == 1500  # one file, the filled part
+    train.run(dagger_cfg(teacher_ckpt, "algo.iterations=5", f"resume={tmp_path / 'part'}"), tmp_path / "unused")
+    a, b = tmp_path / "straight" / "checkpoints" / "last.pt", tmp_path / "part" / "checkpoints" / "last.pt"
+    assert max_weight_difference(a, b) == 0.0
+    assert not list((tmp_path / "part" / "checkpoints").glob("buffer*"))
+
+
+# ----------------------------------------------------------------------------- never overwritten
+STUDENT_SMOKE = [
+    "+experiment=student",
+    "flow=vortex_street",
+    "algo.iterations=1",
+    "algo.num_envs=16",
+    "algo.steps_per_iteration=10",
+    "algo.updates_per_iteration=2",
+    "algo.batch_size=64",
+    "algo.final_eval_episodes=0",
+    *QUIET,
+]
+
+
+@pytest.mark.slow
+def test_smoke_runs_leave_shipped_files_byte_identical(tmp_path):
+    """A one-iteration student and a 50-episode paper evaluation, as a user types them: all in their run dirs."""
+    before = tree_digest(*SHIPPED)
+    env = os.environ | {"OMP_NUM_THREADS": "1"}
+    train_run = tmp_path / "train"
+    subprocess.run(
+        [sys.executable, "train.py", *STUDENT_SMOKE, f"hydra.run.dir={train_run}"], cwd=ROOT, env=env, check=True
+    )
+    eval_run = tmp_path / "eval"
+    subprocess.run(
+        [sys.executable, "evaluate.py", "+experiment=paper_training", "max_episodes=50", "flow=vortex_street"]
+        + [f"hydra.run.dir={eval_run}"],
+        cwd=ROOT,
+        env=env,
+        check=True,
+    )
+    assert tree_digest(*SHIPPED) == before
+    assert (train_run / "checkpoints" / "last.pt").is_file() and (train_run / "results.json").is_file()
+    assert (eval_run / "REPORT.md").is_file() and (eval_run / "paper.json").is_file()
+
+
+def test_shipping_a_partial_run_is_refused_before_anything_is_written(tmp_path):
+    import evaluate
+    import train
+    from flownav.shipping import train_targets
+
+    cfg = compose_train(*STUDENT_SMOKE, "ship=true", f"output_checkpoint={tmp_path / 's.pt'}")
+    with pytest.raises(ConfigError, match=r"^shipping refused: algo\.iterations=1 is below experiment student's 30 "):
+        train.run(cfg, tmp_path / "run")
+    assert not (tmp_path / "run").exists() and not (tmp_path / "s.pt").exists()
+    with pytest.raises(ConfigError, match=r"^ship=true in a -m sweep: the seeds would race for one file"):
+        train_targets(compose_train("+experiment=student", "ship=true"), multirun=True)
+    # A run stopped (or resumed but not finished) before its budget: its last.pt is never shipped.
+    from omegaconf import OmegaConf
+
+    from flownav.agents import DeterministicPolicy
+    from flownav.shipping import ship_run
+
+    full = OmegaConf.to_container(compose_train("+experiment=student"), resolve=True)
+    stopped = tmp_path / "stopped"
+    policy = DeterministicPolicy(6, [0.0, -0.7, -1.5], [1.0, 0.7, 1.5], hidden=(8,))
+    save_policy_checkpoint(
+        stopped / "checkpoints" / "last.pt", policy, "ego", "student", {"config": full}, {"iteration": 7}
+    )
+    with pytest.raises(
+        ConfigError, match=r"last\.pt stopped at iteration 7 of algo\.iterations=30 \(an unfinished run\)"
+    ):
+        ship_run(stopped, {"checkpoint": str(tmp_path / "s.pt")})
+    assert not (tmp_path / "s.pt").exists()
+
+    before = tree_digest(*SHIPPED)
+    with initialize_config_dir(config_dir=str(ROOT / "conf" / "evaluate"), version_base="1.3"):
+        ecfg = compose("config", overrides=["+experiment=paper_training", "max_episodes=50", "report=REPORT.md"])
+    with pytest.raises(ConfigError, match=r"^max_episodes=50 caps the episode count: a reduced run never writes"):
+        evaluate.run(ecfg, log=lambda *_: None)
+    assert tree_digest(*SHIPPED) == before
+
+
+def test_ship_copies_a_finished_run_without_its_resume_state(tmp_path, monkeypatch):
+    """ship=true at the experiment's budget (shrunk here) copies the policy (no env state, no buffer) and record."""
+    import train
+    from flownav import shipping
+
+    tiny_budget = {"iterations": 1, "num_envs": 16, "steps_per_iteration": 10, "updates_per_iteration": 2}
+    monkeypatch.setattr(shipping, "experiment_budget", lambda name, algo: tiny_budget | {"final_eval_episodes": 0})
+    out, record = tmp_path / "ship" / "student.pt", tmp_path / "ship" / "student.json"
+    final = train.run(
+        compose_train(*STUDENT_SMOKE, "ship=true", f"output_checkpoint={out}", f"algo.results_json={record}"),
+        tmp_path / "run",
+    )
+    assert final["shipped"] == {"checkpoint": str(out), "results": str(record)}
+    shipped, last = load_checkpoint(out), load_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt")
+    assert {"env", "buffer"} <= set(last["train_state"]) and not {"env", "buffer"} & set(shipped["train_state"])
+    assert all(torch.equal(shipped["policy"]["state_dict"][k], v) for k, v in last["policy"]["state_dict"].items())
+    assert record.read_bytes() == (tmp_path / "run" / "results.json").read_bytes()
+
+
+# ----------------------------------------------------------------------------- resume is safe
+def test_resume_accepts_only_a_run_directory_and_writes_nothing_before_its_checks(tmp_path):
+    import train
+
+    before = tree_digest(*SHIPPED)
+    cfg = compose_train(*STUDENT_SMOKE, f"resume={ROOT / 'checkpoints' / 'teacher.pt'}")
+    with pytest.raises(ConfigError, match=r"is not a run directory \(no config\.yaml\); pass the directory of the run"):
+        train.run(cfg, tmp_path / "run")
+    with pytest.raises(ConfigError, match=r"no such run directory"):
+        train.run(compose_train(*STUDENT_SMOKE, f"resume={tmp_path / 'nothing'}"), tmp_path / "run")
+    # A run directory whose last.pt is a shipped policy (no training state): refused, nothing written into it.
+    fake = tmp_path / "fake"
+    (fake / "checkpoints").mkdir(parents=True)
+    (fake / "config.yaml").write_text("name: student\n")
+    policy_file = fake / "checkpoints" / "last.pt"
+    policy_file.write_bytes((ROOT / "checkpoints" / "student.pt").read_bytes())
+    with pytest.raises(ConfigError, match=r"holds no training state to resume from \(no .*env"):
+        train.run(compose_train(*STUDENT_SMOKE, f"resume={policy_file}"), tmp_path / "run")
+    assert sorted(p.name for p in fake.rglob("*")) == ["checkpoints", "config.yaml", "last.pt"]
+    assert not (tmp_path / "run").exists() and tree_digest(*SHIPPED) == before
