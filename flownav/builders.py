@@ -12,7 +12,7 @@ from flownav.envs.navigation import NavigationEnv
 from flownav.envs.reward import RewardConfig
 from flownav.envs.tasks import FixedTargetTask, RegionTask, SymmetricTask
 from flownav.flows.analytic import ABCFlow, UniformFlow
-from flownav.flows.base import Box, FlowField
+from flownav.flows.base import Box, FlowField, make_periodic
 from flownav.flows.grid import load_grid_flow
 from flownav.flows.transforms import ScaledFlow
 from flownav.paths import DEFAULT_FLOW_DATASET, resolve
@@ -69,6 +69,11 @@ def build_flow(cfg: Mapping, device="cpu") -> FlowField:
 
     kinds = {"grid": grid, "abc": abc, "uniform": uniform, "vortex_street": vortex_street}
     flow = _pick(cfg, "flow", kinds)()
+    if cfg.get("periodic_axes"):
+        try:
+            make_periodic(flow, list(cfg["periodic_axes"]))
+        except ValueError as e:
+            raise ConfigError(str(e)) from e
     scale = float(cfg.get("speed_scale", 1.0))
     if scale <= 0:
         raise ConfigError(f"flow.speed_scale must be > 0, got {scale}")
