@@ -10,7 +10,7 @@ from collections.abc import Mapping
 
 from flownav.envs.navigation import NavigationEnv
 from flownav.envs.reward import RewardConfig
-from flownav.envs.tasks import FixedTargetTask, RegionTask, SymmetricTask
+from flownav.envs.tasks import DistanceTask, FixedTargetTask, RegionTask, SymmetricTask
 from flownav.flows.analytic import ABCFlow, UniformFlow
 from flownav.flows.base import Box, FlowField, make_periodic
 from flownav.flows.grid import load_grid_flow
@@ -67,7 +67,21 @@ def build_flow(cfg: Mapping, device="cpu") -> FlowField:
         kw = {k: float(cfg[k]) for k in names if cfg.get(k) is not None}
         return VortexStreetFlow(**kw)
 
-    kinds = {"grid": grid, "abc": abc, "uniform": uniform, "vortex_street": vortex_street}
+    def zoo():
+        from flownav.flows.zoo import ZOO
+
+        name = cfg.get("name")
+        if name not in ZOO:
+            raise ConfigError(f"flow.name is {name!r}; the zoo's flows are {sorted(ZOO)}")
+        kw = dict(cfg.get("params") or {})
+        if cfg.get("bounds") is not None:
+            kw["bounds"] = _box(cfg["bounds"], "flow.bounds")
+        try:
+            return ZOO[name](**kw)
+        except TypeError as e:
+            raise ConfigError(f"flow.params: {e}") from e
+
+    kinds = {"grid": grid, "abc": abc, "uniform": uniform, "vortex_street": vortex_street, "zoo": zoo}
     flow = _pick(cfg, "flow", kinds)()
     if cfg.get("periodic_axes"):
         try:
@@ -96,7 +110,18 @@ def build_task(cfg: Mapping, flow: FlowField):
             raise ConfigError(f"task.target must be a point [x, y, z] for a fixed-target task, got {target}")
         return FixedTargetTask(target=target, start=start)
 
-    return _pick(cfg, "task", {"regions": regions, "symmetric": symmetric, "fixed_target": fixed_target})()
+    def distance():
+        box = flow.bounds if cfg.get("box") in (None, "domain") else conv(cfg["box"], "task.box")
+        margin = float(cfg.get("margin", 0.0))
+        if margin:
+            box = Box(tuple(x + margin for x in box.lo), tuple(x - margin for x in box.hi))
+        try:
+            return DistanceTask(box, tuple(cfg.get("distance", (8.0, 12.0))))
+        except ValueError as e:
+            raise ConfigError(str(e)) from e
+
+    kinds = {"regions": regions, "symmetric": symmetric, "fixed_target": fixed_target, "distance": distance}
+    return _pick(cfg, "task", kinds)()
 
 
 def _flow_strength(value):

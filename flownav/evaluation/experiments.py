@@ -86,7 +86,7 @@ class Suite:
             if entry is None:
                 raise KeyError(f"unknown policy {name!r}; the config's policies are {sorted(self.cfg.policies)}")
             if entry.get("scripted"):
-                self._policies[name] = self._scripted(name, str(entry.scripted))
+                self._policies[name] = self._scripted(name, str(entry.scripted), _plain(entry.get("settings")) or {})
                 return self._policies[name]
             path = resolve(str(entry.checkpoint))
             if not path.is_file():
@@ -106,11 +106,15 @@ class Suite:
         return self._policies[name]
 
     @staticmethod
-    def _scripted(name: str, kind: str):
+    def _scripted(name: str, kind: str, settings: dict):
         if kind not in SCRIPTED:
             raise ValueError(f"policies.{name}.scripted is {kind!r}; choose one of {sorted(SCRIPTED)}")
         info = {"checkpoint": f"scripted:{kind}", "sha256": "-", "obs": "geo", "role": "reference"}
-        return SCRIPTED[kind](), "geo", info
+        try:
+            policy = SCRIPTED[kind](**settings)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"policies.{name}.settings: {e}") from e
+        return policy, "geo", info | ({"settings": settings} if settings else {})
 
     def make_env_factory(self, flow, task_cfg, env_cfg, views, seed: int):
         task = build_task(task_cfg, flow)
@@ -123,7 +127,10 @@ class Suite:
     def rollout(self, name: str, flow, task_cfg, env_cfg, episodes: int, seed: int | None = None, record: int = 0):
         policy, obs, _ = self.policy(name)
         make_env = self.make_env_factory(flow, task_cfg, env_cfg, [obs], self.seed if seed is None else seed)
-        return run_episodes(policy, obs, make_env, self.episodes(episodes), self.chunk_size, record=record)
+        episodes = self.episodes(episodes)
+        cap = self.cfg.policies[name].get("max_episodes")  # an expensive reference (the oracle) runs fewer
+        episodes = min(episodes, int(cap)) if cap else episodes
+        return run_episodes(policy, obs, make_env, episodes, self.chunk_size, record=record)
 
     def env_cfg(self, spec) -> DictConfig:
         return OmegaConf.merge(self.cfg.env, spec.get("env") or {})
