@@ -9,7 +9,8 @@ flow, a task, env overrides, an episode count and the paper's numbers. Kinds:
 * ``ratio_sweep``   U_max / V_max ablation by scaling the flow speed (Fig. 6c);
 * ``time_limit``    success against the episode's time limit, from one run at the longest (ours);
 * ``figures``       trajectories, velocity traces and a movie (Figs. 3, 5, 6);
-* ``loss_curves``   DAgger loss of every student run found, mean +- std over seeds (Fig. 2c).
+* ``loss_curves``   DAgger loss of every student run found, mean +- std over seeds (Fig. 2c);
+* ``zoo``           held-out flows against head-to-target and the oracle (generalization.py).
 
 A policy whose checkpoint is missing, or a flow whose dataset is missing, is skipped with an entry
 that says which command produces it; the rest of the suite still runs.
@@ -352,6 +353,11 @@ class Suite:
                     figures.append(tv.plot_abc(runs, aflow, self.figures_dir / f"{name}_abc.png"))
         return {"figures": [str(f) for f in figures], "notes": notes}
 
+    def _run_zoo(self, name, spec, out) -> dict:
+        from flownav.evaluation.generalization import run_zoo
+
+        return run_zoo(self, name, spec, out)
+
     def _run_loss_curves(self, name, spec, out) -> dict:
         from flownav.viz.plots import collect_loss_runs, plot_loss_curves
 
@@ -393,7 +399,7 @@ def _policy_names(spec) -> list[str]:
     return list(dict.fromkeys(names))
 
 
-KINDS = ("success", "extended", "misalignment", "ratio_sweep", "time_limit", "figures", "loss_curves")
+KINDS = ("success", "extended", "misalignment", "ratio_sweep", "time_limit", "figures", "loss_curves", "zoo")
 
 
 def _angle_key(a: float) -> str:
@@ -424,7 +430,7 @@ def run_suite(cfg: DictConfig, log=print) -> dict:
             continue
         log(f"== {name}: {spec.get('title', '')}")
         results[name] = suite.run(name, spec)
-        results[name]["command"] = f"python evaluate.py +experiment=paper_{name}"
+        results[name]["command"] = str(spec.get("command") or f"python evaluate.py +experiment=paper_{name}")
         for m in results[name]["missing"]:
             log(f"   skipped: {m}")
     return results
