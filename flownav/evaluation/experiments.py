@@ -107,12 +107,12 @@ class Suite:
         return self._policies[name]
 
     @staticmethod
-    def _scripted(name: str, kind: str, settings: dict):
+    def _scripted(name: str, kind: str, settings: dict | None = None):
         if kind not in SCRIPTED:
             raise ValueError(f"policies.{name}.scripted is {kind!r}; choose one of {sorted(SCRIPTED)}")
         info = {"checkpoint": f"scripted:{kind}", "sha256": "-", "obs": "geo", "role": "reference"}
         try:
-            policy = SCRIPTED[kind](**settings)
+            policy = SCRIPTED[kind](**(settings or {}))
         except (TypeError, ValueError) as e:
             raise ValueError(f"policies.{name}.settings: {e}") from e
         return policy, "geo", info | ({"settings": settings} if settings else {})

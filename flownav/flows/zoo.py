@@ -182,14 +182,14 @@ class BeltramiShell(_Analytic):
         bounds: Box = CUBE_BOX,
     ):
         g = torch.Generator().manual_seed(int(seed))
-        n = torch.randn(modes, 3, generator=g)
+        n = torch.randn(modes, 3, generator=g, dtype=torch.float64)  # float64: exact Beltrami modes at any precision
         n = n / n.norm(dim=-1, keepdim=True)
-        a = torch.linalg.cross(n, torch.randn(modes, 3, generator=g))
+        a = torch.linalg.cross(n, torch.randn(modes, 3, generator=g, dtype=torch.float64))
         a = a / a.norm(dim=-1, keepdim=True)
         self.seed, self.k0 = int(seed), float(k0)
         self.n, self.a, self.b = n, a, torch.linalg.cross(n, a)
-        self.phase = torch.rand(modes, generator=g) * 2 * math.pi
-        self.freq = omega[0] + (omega[1] - omega[0]) * torch.rand(modes, generator=g)
+        self.phase = torch.rand(modes, generator=g, dtype=torch.float64) * 2 * math.pi
+        self.freq = omega[0] + (omega[1] - omega[0]) * torch.rand(modes, generator=g, dtype=torch.float64)
         # Each mode has |u|^2 = 1 and the modes are uncorrelated: rms speed sqrt(modes) before scaling.
         self.amp = float(rms) / math.sqrt(modes)
         self._finish(bounds, None, False)
