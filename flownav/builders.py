@@ -14,7 +14,7 @@ from flownav.envs.tasks import DistanceTask, FixedTargetTask, RegionTask, Symmet
 from flownav.flows.analytic import ABCFlow, UniformFlow
 from flownav.flows.base import Box, FlowField, make_periodic
 from flownav.flows.grid import load_grid_flow
-from flownav.flows.transforms import ScaledFlow
+from flownav.flows.transforms import RotatedFlow, ScaledFlow
 from flownav.paths import DEFAULT_FLOW_DATASET, resolve
 
 
@@ -91,7 +91,11 @@ def build_flow(cfg: Mapping, device="cpu") -> FlowField:
     scale = float(cfg.get("speed_scale", 1.0))
     if scale <= 0:
         raise ConfigError(f"flow.speed_scale must be > 0, got {scale}")
-    return ScaledFlow(flow, scale) if scale != 1.0 else flow
+    flow = ScaledFlow(flow, scale) if scale != 1.0 else flow
+    if cfg.get("rotate_deg"):  # the flow alone (domain and obstacles with it), not the task: unlike misalignment
+        center = tuple(float(c) for c in cfg.get("rotate_center", (0.0, 0.0)))
+        flow = RotatedFlow(flow, float(cfg["rotate_deg"]), center)
+    return flow
 
 
 def build_task(cfg: Mapping, flow: FlowField):

@@ -72,9 +72,10 @@ def test_no_zoo_case_is_a_member_of_a_training_family_unless_it_says_so():
     assert held >= 8 and len(set(zoo) - {"beltrami_shell"}) >= 5
     # The check can fail: trained members are recognised.
     assert family_member({"type": "uniform", "velocity": [0.5, 0, 0]}, cfg.env, families) == "uniform_currents"
-    assert family_member({"type": "grid", "speed_scale": 1.1}, cfg.env, families) == "wake"
-    rotated = OmegaConf.merge(cfg.env, {"misalignment_deg": 45})
-    assert family_member({"type": "grid", "speed_scale": 1.35}, rotated, families) is None
+    assert family_member({"type": "grid", "speed_scale": 1.1, "rotate_deg": -60}, cfg.env, families) == "wake"
+    assert family_member({"type": "grid", "rotate_deg": 120}, cfg.env, families) is None
+    shell = {"type": "zoo", "name": "beltrami_shell", "params": {"k0": 0.5}}  # wavelength 12.6: a trained one
+    assert family_member(shell, cfg.env, families) == "fourier_modes"
 
 
 def test_every_zoo_case_builds_with_starts_and_targets_8_to_12_apart():

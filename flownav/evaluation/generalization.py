@@ -15,6 +15,7 @@ The zoo is for evaluation only: nothing is tuned on it.
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Mapping
 
@@ -22,6 +23,7 @@ from omegaconf import OmegaConf
 
 from flownav.atomic import atomic_write_text
 from flownav.evaluation.metrics import summarize
+from flownav.flows.zoo import BeltramiShell
 from flownav.paths import resolve
 
 REFERENCE = "head_to_target"
@@ -31,21 +33,29 @@ ORACLE = "oracle"
 def family_member(flow_cfg: Mapping, env_cfg: Mapping, families) -> str | None:
     """The name of the training family a case's flow belongs to, or None.
 
-    A family is ``{name, type, [zoo_name], ranges: {key: [lo, hi]}}``: a case is a member when its flow's
-    ``type`` (and ``name`` for zoo flows) match and each ranged value lies in its range. Values: ``strength``
-    (flow.speed_scale times the largest env.flow_strength draw), ``speed`` (a uniform current's speed) and
-    ``misalignment_deg`` (the env's rotation about z, in [0, 360)).
+    A family is ``{name, type, [zoo_name], ranges: {key: [lo, hi] or [[lo, hi], ...]}}``: a case is a member
+    when its flow's ``type`` (and ``name`` for zoo flows) match and each ranged value lies in one of its
+    intervals. Values: ``strength`` (flow.speed_scale times the largest env.flow_strength draw), ``speed`` (a
+    uniform current's speed), ``rotation_deg`` (flow.rotate_deg, the flow turned against the task, in
+    [0, 360)) and ``wavelength`` (2 pi / k0 of a zoo Beltrami shell).
     """
     scale = float(flow_cfg.get("speed_scale", 1.0))
+    params = dict(flow_cfg.get("params") or {})
     values = {
         "strength": scale * max(float(x) for x in (env_cfg.get("flow_strength") or [1.0])),
-        "misalignment_deg": float(env_cfg.get("misalignment_deg", 0.0)) % 360.0,
+        "rotation_deg": float(flow_cfg.get("rotate_deg", 0.0)) % 360.0,
         "speed": scale * sum(float(v) ** 2 for v in flow_cfg.get("velocity", (0.0, 0.0, 0.0))) ** 0.5,
+        "wavelength": 2 * math.pi / float(params.get("k0", BeltramiShell.K0)),
     }
+
+    def inside(value, intervals) -> bool:
+        intervals = [intervals] if not isinstance(intervals[0], list | tuple) else intervals
+        return any(float(lo) <= value <= float(hi) for lo, hi in intervals)
+
     for fam in families:
         if fam["type"] != flow_cfg.get("type") or fam.get("zoo_name", flow_cfg.get("name")) != flow_cfg.get("name"):
             continue
-        if all(float(lo) <= values[k] <= float(hi) for k, (lo, hi) in dict(fam.get("ranges") or {}).items()):
+        if all(inside(values[k], list(v)) for k, v in dict(fam.get("ranges") or {}).items()):
             return str(fam["name"])
     return None
 

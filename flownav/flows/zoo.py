@@ -172,11 +172,13 @@ class PoiseuilleChannel(_Analytic):
 
 
 class BeltramiShell(_Analytic):
+    K0 = 2.0  # wavelength pi: shorter than any trained mode (4-24)
+
     def __init__(
         self,
         seed=1000,
         modes=16,
-        k0=1.4,
+        k0=K0,
         rms=0.6,
         omega=(0.1, 0.4),
         bounds: Box = CUBE_BOX,
