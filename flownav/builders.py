@@ -12,12 +12,12 @@ from collections.abc import Mapping
 from flownav import schema
 from flownav.envs.navigation import NavigationEnv
 from flownav.envs.reward import RewardConfig
-from flownav.envs.tasks import FixedTargetTask, RegionTask, SymmetricTask
+from flownav.envs.tasks import DistanceTask, FixedTargetTask, RegionTask, SymmetricTask
 from flownav.errors import ConfigError
 from flownav.flows.analytic import ABCFlow, UniformFlow
-from flownav.flows.base import Box, FlowField
+from flownav.flows.base import Box, FlowField, make_periodic
 from flownav.flows.grid import load_grid_flow
-from flownav.flows.transforms import ScaledFlow
+from flownav.flows.transforms import RotatedFlow, ScaledFlow
 from flownav.paths import DEFAULT_FLOW_DATASET, resolve
 
 __all__ = ["ConfigError", "build_env", "build_flow", "build_task"]
@@ -60,10 +60,32 @@ def build_flow(cfg: Mapping, device="cpu") -> FlowField:
         kw = {k: float(cfg[k]) for k in names if cfg.get(k) is not None}
         return VortexStreetFlow(**kw)
 
-    kinds = {"grid": grid, "abc": abc, "uniform": uniform, "vortex_street": vortex_street}
+    def zoo():
+        from flownav.flows.zoo import ZOO
+
+        if cfg["name"] not in ZOO:
+            raise ConfigError(f"flow.name is {cfg['name']!r}; the zoo's flows are {sorted(ZOO)}")
+        kw = dict(cfg.get("params") or {})
+        if cfg.get("bounds") is not None:
+            kw["bounds"] = _box(cfg["bounds"])
+        try:
+            return ZOO[cfg["name"]](**kw)
+        except TypeError as e:
+            raise ConfigError(f"flow.params: {e}") from e
+
+    kinds = {"grid": grid, "abc": abc, "uniform": uniform, "vortex_street": vortex_street, "zoo": zoo}
     flow = kinds[cfg["type"]]()
+    if cfg.get("periodic_axes"):
+        try:
+            make_periodic(flow, list(cfg["periodic_axes"]))
+        except ValueError as e:
+            raise ConfigError(str(e)) from e
     scale = float(cfg.get("speed_scale", 1.0))
-    return ScaledFlow(flow, scale) if scale != 1.0 else flow
+    flow = ScaledFlow(flow, scale) if scale != 1.0 else flow
+    if cfg.get("rotate_deg"):  # the flow alone (domain and obstacles with it), not the task: unlike misalignment
+        center = tuple(float(c) for c in cfg.get("rotate_center", (0.0, 0.0)))
+        flow = RotatedFlow(flow, float(cfg["rotate_deg"]), center)
+    return flow
 
 
 def build_task(cfg: Mapping, flow: FlowField):
@@ -80,7 +102,18 @@ def build_task(cfg: Mapping, flow: FlowField):
         start = flow.bounds if cfg.get("start") in (None, "domain") else conv(cfg["start"])
         return FixedTargetTask(target=[float(x) for x in cfg["target"]], start=start)
 
-    return {"regions": regions, "symmetric": symmetric, "fixed_target": fixed_target}[cfg["type"]]()
+    def distance():
+        box = flow.bounds if cfg.get("box") in (None, "domain") else conv(cfg["box"])
+        margin = float(cfg.get("margin", 0.0))
+        if margin:
+            box = Box(tuple(x + margin for x in box.lo), tuple(x - margin for x in box.hi))
+        try:
+            return DistanceTask(box, tuple(cfg.get("distance", (8.0, 12.0))))
+        except ValueError as e:
+            raise ConfigError(str(e)) from e
+
+    kinds = {"regions": regions, "symmetric": symmetric, "fixed_target": fixed_target, "distance": distance}
+    return kinds[cfg["type"]]()
 
 
 def build_env(

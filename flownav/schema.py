@@ -224,11 +224,18 @@ ENV = {
     "reward": REWARD,
 }
 
-FLOW_COMMON = {"type": Str(required=True), "speed_scale": Float(gt=0)}
+FLOW_COMMON = {
+    "type": Str(required=True),
+    "speed_scale": Float(gt=0),
+    "periodic_axes": Key(STRS, null=True),  # e.g. [y, z]: positions wrap, the target counts at any periodic image
+    "rotate_deg": Float(),  # the flow (with its domain and obstacles) turned about z, the task not
+    "rotate_center": Key(FLOATS, size=2),
+}
 FLOWS = {
     "grid": {"path": Str(null=True)},
     "abc": {k: Float() for k in ("A", "B", "C", "eps", "omega")} | {"bounds": Key(BOX, null=True)},
     "uniform": {"velocity": Key(FLOATS, size=3), "bounds": Key(BOX, null=True)},
+    "zoo": {"name": Str(required=True), "bounds": Key(BOX, null=True)},  # params: the flow class's keywords
     "vortex_street": {
         "period": Float(gt=0),
         "advection": Float(gt=0),
@@ -244,6 +251,11 @@ TASKS = {
     "regions": {"start": Key(BOX, required=True), "target": Key(BOX, required=True)},
     "symmetric": {"start": Key(BOX, required=True), "target": Key(BOX, required=True)},
     "fixed_target": {"start": Key(BOX, choices=("domain",), null=True), "target": Key(FLOATS, size=3, required=True)},
+    "distance": {
+        "box": Key(BOX, choices=("domain",), null=True),
+        "distance": Key(FLOATS, size=2, ge=0),
+        "margin": Float(ge=0),
+    },
 }
 
 LOGGER = {

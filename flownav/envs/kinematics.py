@@ -59,3 +59,14 @@ def move(pos: Tensor, swim_velocity: Tensor, flow_velocity: Tensor, dt: float) -
     """Advance positions by one explicit Euler step; returns (new position, total velocity)."""
     v = swim_velocity + flow_velocity
     return pos + v * dt, v
+
+
+def step_reaches(to_target: Tensor, step: Tensor, radius: float) -> Tensor:
+    """Whether a straight step passes within ``radius`` of the target (segment against sphere).
+
+    ``to_target``: target - P at the start of the step, ``step``: P' - P (both ``[N, 3]``). The closest
+    point of the segment P + s (P' - P), s in [0, 1], to the target decides, so a step longer than the
+    success ball is wide cannot jump over it.
+    """
+    s = ((to_target * step).sum(-1) / (step * step).sum(-1).clamp_min(1e-12)).clamp(0.0, 1.0)
+    return (to_target - s[:, None] * step).norm(dim=-1) < radius

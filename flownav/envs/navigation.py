@@ -22,7 +22,7 @@ from torch import Tensor
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
-from flownav.envs.kinematics import body_frame, heading_vector, move, turn, wrap_angle
+from flownav.envs.kinematics import body_frame, heading_vector, move, step_reaches, turn, wrap_angle
 from flownav.envs.observations import (
     HISTORY_LEN,
     HISTORY_STRIDE,
@@ -214,7 +214,7 @@ class NavigationEnv(EnvBase):
             bad = (
                 ~base_flow.in_domain(start)
                 | base_flow.in_obstacle(start)
-                | ((start - target).norm(dim=-1) <= self.reward_cfg.success_radius)
+                | (base_flow.displacement(start, target).norm(dim=-1) <= self.reward_cfg.success_radius)
             )
             if not bad.any():
                 break
@@ -266,7 +266,7 @@ class NavigationEnv(EnvBase):
                 self.strength = put(self.strength, strength)
             flow_vel = self._flow_at(start, t0, idx)
             require_finite(flow_vel, "the flow velocity at the start", FLOW_FIX, start)
-            d = (target - start).norm(dim=-1)
+            d = self.flow.displacement(start, target).norm(dim=-1)
             zero = torch.zeros_like(d)
             self.pos, self.target, self.theta, self.psi = (
                 put(self.pos, start),
@@ -301,7 +301,10 @@ class NavigationEnv(EnvBase):
         self.theta, self.psi = turn(self.theta, self.psi, dtheta, dpsi, self.dt)
         self.speed = speed * self.swim_speed_scale
         swim = self.speed[:, None] * heading_vector(self.theta, self.psi)
+        prev_pos = self.pos
         self.pos, _ = move(self.pos, swim, self.flow_vel, self.dt)
+        step = self.pos - prev_pos
+        self.pos = self.flow.wrap(self.pos)  # periodic axes: back into the box
         self.steps = self.steps + 1
         self.time = self.steps * self.dt
         self.flow_vel = self._flow_at(self.pos, self.t0 + self.time)
@@ -312,8 +315,9 @@ class NavigationEnv(EnvBase):
             self.flow_ring[:, self.ring_ptr] = self.flow_vel
 
         prev_dist = self.dist
-        self.dist = (self.target - self.pos).norm(dim=-1)
-        success = self.dist < self.reward_cfg.success_radius
+        self.dist = self.flow.displacement(self.pos, self.target).norm(dim=-1)
+        # Along the whole step, not only at its end: a fast step must not jump over the success ball.
+        success = step_reaches(self.flow.displacement(prev_pos, self.target), step, self.reward_cfg.success_radius)
         left = ~self.flow.in_domain(self.pos)
         hit = self.flow.in_obstacle(self.pos)
         timeout = self.steps >= self.max_steps
@@ -348,7 +352,7 @@ class NavigationEnv(EnvBase):
 
     def _observe(self) -> TensorDict:
         state = State(
-            to_target=self.target - self.pos,
+            to_target=self.flow.displacement(self.pos, self.target),
             velocity=self.vel,
             flow=self.flow_vel,
             theta=self.theta,

@@ -69,3 +69,35 @@ class ListTask:
         idx = (torch.arange(n) + self._next) % len(self.starts)
         self._next = int((self._next + n) % len(self.starts))
         return self.starts[idx].to(device), self.targets[idx].to(device)
+
+
+class DistanceTask:
+    """Start uniform in a box, target in the same box at a distance uniform in [low, high] in a uniform
+    random direction (redrawn until it lies in the box): point-to-point navigation anywhere in a flow."""
+
+    def __init__(self, box: Box, distance: Sequence[float] = (8.0, 12.0), tries: int = 5000):
+        low, high = (float(d) for d in distance)
+        if not 0 < low <= high:
+            raise ValueError(f"task.distance must be [low, high] with 0 < low <= high, got {list(distance)}")
+        diagonal = sum(s * s for s in box.size) ** 0.5
+        if low >= diagonal:
+            raise ValueError(f"task.distance {low:g} does not fit in the box (its diagonal is {diagonal:.3g})")
+        self.box, self.low, self.high, self.tries = box, low, high, tries
+
+    def sample(self, n: int, generator: torch.Generator | None = None, device="cpu") -> tuple[Tensor, Tensor]:
+        start, target = torch.zeros(n, 3, device=device), torch.zeros(n, 3, device=device)
+        todo = torch.ones(n, dtype=torch.bool, device=device)
+        for _ in range(self.tries):
+            k = int(todo.sum())
+            s = self.box.sample(k, generator, device)
+            direction = torch.randn(k, 3, generator=generator, device=device)
+            direction = direction / direction.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+            d = self.low + (self.high - self.low) * torch.rand(k, 1, generator=generator, device=device)
+            t = s + d * direction
+            ok = self.box.contains(t)
+            idx = todo.nonzero().squeeze(-1)[ok]
+            start[idx], target[idx] = s[ok], t[ok]
+            todo[idx] = False
+            if not todo.any():
+                return start, target
+        raise ValueError(f"no target {self.low:g}-{self.high:g} away fits in {self.box} after {self.tries} tries")

@@ -9,7 +9,8 @@ flow, a task, env overrides, an episode count and the paper's numbers. Kinds:
 * ``ratio_sweep``   U_max / V_max ablation by scaling the flow speed (Fig. 6c);
 * ``time_limit``    success against the episode's time limit, from one run at the longest (ours);
 * ``figures``       trajectories, velocity traces and a movie (Figs. 3, 5, 6);
-* ``loss_curves``   DAgger loss of every student run found, mean +- std over seeds (Fig. 2c).
+* ``loss_curves``   DAgger loss of every student run found, mean +- std over seeds (Fig. 2c);
+* ``zoo``           held-out flows against head-to-target and the oracle (generalization.py).
 
 A policy whose checkpoint is missing, or a flow whose dataset is missing, is skipped with an entry
 that says which command produces it; the rest of the suite still runs.
@@ -61,7 +62,8 @@ class Suite:
         self.chunk_size = int(cfg.get("chunk_size", 10_000))
         self.max_episodes = cfg.get("max_episodes")
         self.progress = bool(cfg.get("progress", False))  # a bar over each experiment's episodes
-        self.figures_dir = Path(figures_dir or resolve(cfg.get("figures_dir", "results/figures")))
+        # evaluate.py sets figures_dir (the run directory unless shipping); a library caller's default is ./figures
+        self.figures_dir = Path(figures_dir or cfg.get("figures_dir") or "figures")
         self.log = log
         self._flows: dict[str, object] = {}
         self._policies: dict[str, tuple] = {}
@@ -87,7 +89,7 @@ class Suite:
             if entry is None:
                 raise KeyError(f"unknown policy {name!r}; the config's policies are {sorted(self.cfg.policies)}")
             if entry.get("scripted"):
-                self._policies[name] = self._scripted(name, str(entry.scripted))
+                self._policies[name] = self._scripted(name, str(entry.scripted), _plain(entry.get("settings")) or {})
                 return self._policies[name]
             path = resolve(str(entry.checkpoint))
             if not path.is_file():
@@ -107,11 +109,15 @@ class Suite:
         return self._policies[name]
 
     @staticmethod
-    def _scripted(name: str, kind: str):
+    def _scripted(name: str, kind: str, settings: dict | None = None):
         if kind not in SCRIPTED:
             raise ValueError(f"policies.{name}.scripted is {kind!r}; choose one of {sorted(SCRIPTED)}")
         info = {"checkpoint": f"scripted:{kind}", "sha256": "-", "obs": "geo", "role": "reference"}
-        return SCRIPTED[kind](), "geo", info
+        try:
+            policy = SCRIPTED[kind](**(settings or {}))
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"policies.{name}.settings: {e}") from e
+        return policy, "geo", info | ({"settings": settings} if settings else {})
 
     def make_env_factory(self, flow, task_cfg, env_cfg, views, seed: int):
         task = build_task(task_cfg, flow)
@@ -124,8 +130,11 @@ class Suite:
     def rollout(self, name: str, flow, task_cfg, env_cfg, episodes: int, seed: int | None = None, record: int = 0):
         policy, obs, _ = self.policy(name)
         make_env = self.make_env_factory(flow, task_cfg, env_cfg, [obs], self.seed if seed is None else seed)
+        episodes = self.episodes(episodes)
+        cap = self.cfg.policies[name].get("max_episodes")  # an expensive reference (the oracle) runs fewer
+        episodes = min(episodes, int(cap)) if cap else episodes
         return run_episodes(
-            policy, obs, make_env, self.episodes(episodes), self.chunk_size, record=record, progress=self.progress
+            policy, obs, make_env, episodes, self.chunk_size, record=record, progress=self.progress
         )
 
     def env_cfg(self, spec) -> DictConfig:
@@ -348,6 +357,11 @@ class Suite:
                     figures.append(tv.plot_abc(runs, aflow, self.figures_dir / f"{name}_abc.png"))
         return {"figures": [str(f) for f in figures], "notes": notes}
 
+    def _run_zoo(self, name, spec, out) -> dict:
+        from flownav.evaluation.generalization import run_zoo
+
+        return run_zoo(self, name, spec, out)
+
     def _run_loss_curves(self, name, spec, out) -> dict:
         from flownav.viz.plots import collect_loss_runs, plot_loss_curves
 
@@ -389,7 +403,7 @@ def _policy_names(spec) -> list[str]:
     return list(dict.fromkeys(names))
 
 
-KINDS = ("success", "extended", "misalignment", "ratio_sweep", "time_limit", "figures", "loss_curves")
+KINDS = ("success", "extended", "misalignment", "ratio_sweep", "time_limit", "figures", "loss_curves", "zoo")
 
 
 def _angle_key(a: float) -> str:
@@ -420,7 +434,7 @@ def run_suite(cfg: DictConfig, log=print) -> dict:
             continue
         log(f"== {name}: {spec.get('title', '')}")
         results[name] = suite.run(name, spec)
-        results[name]["command"] = f"python evaluate.py +experiment=paper_{name}"
+        results[name]["command"] = str(spec.get("command") or f"python evaluate.py +experiment=paper_{name}")
         for m in results[name]["missing"]:
             log(f"   skipped: {m}")
     return results

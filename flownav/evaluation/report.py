@@ -254,6 +254,10 @@ def write_report(data: dict, path: Path, command: str, seconds: float | None = N
         elif kind == "ratio_sweep":
             scales = [f"flow x{s:.3g}" for s in r.get("flow_speed_scales", [])]
             lines += _sweep_table(r, r.get("ratios", []), lambda x: f"{x:.3f}", "U_max / V_max", extra=scales)
+        elif kind == "zoo":
+            from flownav.evaluation.generalization import zoo_markdown
+
+            lines += zoo_markdown(r)
         elif kind == "loss_curves" and r.get("curve"):
             c = r["curve"]
             lines += [

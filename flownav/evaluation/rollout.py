@@ -64,7 +64,8 @@ def run_episodes(
     """Run exactly ``episodes`` deterministic episodes of ``policy`` (obs -> action).
 
     Args:
-        policy: maps the ``obs_key`` observation ``[B, d]`` to actions ``[B, 3]``.
+        policy: maps the ``obs_key`` observation ``[B, d]`` to actions ``[B, 3]``; or a privileged policy with
+            ``act_privileged(env, slots) -> [len(slots), 3]`` that plans from the env's state (the oracle).
         make_env: builds the env of one chunk: ``make_env(num_envs, chunk_index)``. The env must emit
             ``obs_key`` and must not auto-reset (a plain NavigationEnv never does).
         episodes, chunk_size: N, and how many run side by side.
@@ -77,7 +78,9 @@ def run_episodes(
     """
     if episodes < 1 or chunk_size < 1:
         raise ValueError(f"need episodes >= 1 and chunk_size >= 1, got {episodes}, {chunk_size}")
-    act = _policy_fn(policy)
+    # A privileged policy (the oracle) reads the env's true state: act_privileged(env, running slots) -> actions.
+    privileged = getattr(policy, "act_privileged", None)
+    act = None if privileged else _policy_fn(policy)
     parts: dict[str, list[Tensor]] = {k: [] for k in ("start", "target", "status", "time", "final_position")}
     traj: dict[str, Tensor] = {}
     done_so_far, chunk = 0, 0
@@ -111,7 +114,11 @@ def run_episodes(
                 raise RuntimeError(f"episodes still running after {limit} steps: the env does not time out")
             obs = td[obs_key]
             n_run = int(running.sum())
-            if n_run * 2 < n:  # few left: only the running slots need actions
+            if privileged:
+                idx = running.nonzero().squeeze(-1)
+                action = torch.zeros_like(action)
+                action[idx.to(action.device)] = privileged(env, idx)
+            elif n_run * 2 < n:  # few left: only the running slots need actions
                 idx = running.nonzero().squeeze(-1).to(obs.device)
                 action = torch.zeros_like(action)
                 action[idx] = act(obs[idx])

@@ -12,6 +12,7 @@ from torch import Tensor, nn
 from flownav.agents.networks import DeterministicPolicy
 from flownav.envs.kinematics import wrap_angle
 from flownav.envs.navigation import DPSI_MAX, DTHETA_MAX
+from flownav.evaluation.oracle import Oracle
 
 ACTION_LOW = (0.0, -DTHETA_MAX, -DPSI_MAX)
 
@@ -57,8 +58,9 @@ class Passive(nn.Module):
         return obs.new_zeros(obs.shape[:-1] + (3,))
 
 
-# Scripted reference policies the evaluation suite can name (``policies.<name>.scripted``); all read the geo view.
-SCRIPTED = {"head_to_target": HeadToTarget, "passive": Passive}
+# Scripted reference policies the evaluation suite can name (``policies.<name>.scripted``, keyword arguments in
+# ``policies.<name>.settings``); all read the geo view. The oracle (oracle.py) plans from the env's true state.
+SCRIPTED = {"head_to_target": HeadToTarget, "passive": Passive, "oracle": Oracle}
 
 
 def random_geo_obs(n: int, generator: torch.Generator | None = None, scale: float = 12.0) -> Tensor:

@@ -87,12 +87,34 @@ class FlowField:
     obstacles: Sequence[Cylinder] = ()
     max_speed: float
     period: float | None = None
+    periodic_axes: tuple[int, ...] = ()  # axes (0, 1, 2 = x, y, z) on which the domain box wraps around
 
     def velocity(self, pos: Tensor, t: Tensor) -> Tensor:  # pragma: no cover - interface
         raise NotImplementedError
 
     def in_domain(self, pos: Tensor) -> Tensor:
-        return self.bounds.contains(pos)
+        if not self.periodic_axes:
+            return self.bounds.contains(pos)
+        bounded = [a for a in range(3) if a not in self.periodic_axes]
+        lo, hi = pos.new_tensor(self.bounds.lo)[bounded], pos.new_tensor(self.bounds.hi)[bounded]
+        p = pos[..., bounded]
+        return ((p >= lo) & (p <= hi)).all(-1)
+
+    def wrap(self, pos: Tensor) -> Tensor:
+        """Positions mapped into the box on the periodic axes (unchanged on the others)."""
+        if not self.periodic_axes:
+            return pos
+        lo, size = _periodic_lo_size(self, pos)
+        return torch.where(size > 0, lo + torch.remainder(pos - lo, size.clamp_min(1e-30)), pos)
+
+    def displacement(self, pos: Tensor, target: Tensor) -> Tensor:
+        """target - pos, the minimum image across the periodic axes: the one to-target vector of reward,
+        success and every observation."""
+        d = target - pos
+        if not self.periodic_axes:
+            return d
+        _, size = _periodic_lo_size(self, pos)
+        return torch.where(size > 0, d - size * torch.round(d / size.clamp_min(1e-30)), d)
 
     def in_obstacle(self, pos: Tensor) -> Tensor:
         hit = torch.zeros(pos.shape[:-1], dtype=torch.bool, device=pos.device)
@@ -103,6 +125,45 @@ class FlowField:
     def to(self, device) -> FlowField:
         """Flows without tensors are device-free; grid flows override this."""
         return self
+
+
+AXES = "xyz"
+
+
+def _periodic_lo_size(flow: FlowField, like: Tensor) -> tuple[Tensor, Tensor]:
+    """Box corner and period per axis (period 0 on bounded axes)."""
+    lo = like.new_tensor(flow.bounds.lo)
+    size = like.new_tensor([flow.bounds.size[a] if a in flow.periodic_axes else 0.0 for a in range(3)])
+    return lo, size
+
+
+def make_periodic(flow: FlowField, axes, samples: int = 256, tol: float = 1e-4) -> FlowField:
+    """Let ``flow``'s domain wrap around on ``axes`` (names "x", "y", "z"); returns the flow.
+
+    Refuses a flow whose velocity differs between the two opposite faces of its box on an axis (its box is
+    not a whole number of spatial periods there), checked at random points and times.
+    """
+    names = [str(a) for a in axes]
+    bad = [a for a in names if a not in AXES]
+    if bad or len(set(names)) != len(names):
+        raise ValueError(f"flow.periodic_axes must be distinct names among x, y, z; got {names}")
+    idx = tuple(sorted(AXES.index(a) for a in names))
+    g = torch.Generator().manual_seed(0)
+    lo, hi = torch.tensor(flow.bounds.lo, dtype=torch.float64), torch.tensor(flow.bounds.hi, dtype=torch.float64)
+    for a in idx:
+        p = (lo + torch.rand(samples, 3, generator=g, dtype=torch.float64) * (hi - lo)).float()
+        q = p.clone()
+        p[:, a], q[:, a] = float(lo[a]), float(hi[a])
+        t = torch.rand(samples, generator=g) * (flow.period or 10.0)
+        gap = float((flow.velocity(p, t) - flow.velocity(q, t)).norm(dim=-1).max())
+        if gap > tol * max(1.0, flow.max_speed):
+            raise ValueError(
+                f"flow.periodic_axes: the flow is not periodic over its box on axis {AXES[a]} (velocity differs "
+                f"by {gap:.3g} between the faces {AXES[a]} = {float(lo[a]):g} and {float(hi[a]):g}); make the box "
+                "span whole periods on that axis or drop it from periodic_axes"
+            )
+    flow.periodic_axes = idx
+    return flow
 
 
 class FunctionFlow(FlowField):

@@ -36,6 +36,9 @@ class RotatedFlow(FlowField):
         self.obstacles = base.obstacles
         self.max_speed = base.max_speed
         self.period = base.period
+        if angle_deg and set(base.periodic_axes) & {0, 1}:
+            raise ValueError("a flow periodic in x or y cannot be rotated about z (misalignment_deg must be 0)")
+        self.periodic_axes = base.periodic_axes  # z only: rotation about z leaves it unchanged
 
     def to_base(self, pos: Tensor) -> Tensor:
         return rotate_z(pos, -self.angle, self.center)
@@ -66,6 +69,7 @@ class ScaledFlow(FlowField):
         self.obstacles = base.obstacles
         self.max_speed = base.max_speed * self.factor
         self.period = base.period
+        self.periodic_axes = base.periodic_axes
 
     def velocity(self, pos: Tensor, t: Tensor) -> Tensor:
         return self.factor * self.base.velocity(pos, t)
