@@ -10,9 +10,18 @@ from collections.abc import Mapping
 
 from flownav.envs.navigation import NavigationEnv
 from flownav.envs.reward import RewardConfig
-from flownav.envs.tasks import FixedTargetTask, RegionTask, SymmetricTask
+from flownav.envs.tasks import FamilyTask, FixedTargetTask, RegionTask, SymmetricTask
 from flownav.flows.analytic import ABCFlow, UniformFlow
-from flownav.flows.base import Box, FlowField
+from flownav.flows.base import WAKE_BOUNDS, Box, FlowField
+from flownav.flows.families import (
+    FlowFamily,
+    FourierFamily,
+    MixtureFamily,
+    SumFamily,
+    UniformFamily,
+    vortex_street_family,
+    wake_family,
+)
 from flownav.flows.grid import load_grid_flow
 from flownav.flows.transforms import ScaledFlow
 from flownav.paths import DEFAULT_FLOW_DATASET, resolve
@@ -43,6 +52,25 @@ def _pick(cfg: Mapping, key: str, choices: Mapping):
     return choices[kind]
 
 
+def _family_member(cfg: Mapping, key: str, bounds: Box, device) -> FlowFamily:
+    """One member of a flow family (flownav/flows/families.py): its type and its constructor's arguments."""
+    args = {k: v for k, v in cfg.items() if k not in ("type", "weight")}
+    kind = cfg.get("type")
+    if kind == "sum":
+        parts = args.get("members") or {}
+        return SumFamily([_family_member(m, f"{key}.members.{n}", bounds, device) for n, m in parts.items()], bounds)
+
+    def wake(path=None, **kw):
+        return wake_family(load_grid_flow(resolve(path or DEFAULT_FLOW_DATASET), device=device), **kw)
+
+    makers = {"fourier": FourierFamily, "uniform": UniformFamily, "vortex_street": vortex_street_family, "wake": wake}
+    maker = _pick(cfg, key, {**makers, "sum": None})
+    try:
+        return maker(bounds=bounds, **args)
+    except (TypeError, ValueError) as e:
+        raise ConfigError(f"{key} (type: {kind}): {e}") from e
+
+
 def build_flow(cfg: Mapping, device="cpu") -> FlowField:
     def grid():
         path = cfg.get("path") or DEFAULT_FLOW_DATASET
@@ -67,7 +95,21 @@ def build_flow(cfg: Mapping, device="cpu") -> FlowField:
         kw = {k: float(cfg[k]) for k in names if cfg.get(k) is not None}
         return VortexStreetFlow(**kw)
 
-    kinds = {"grid": grid, "abc": abc, "uniform": uniform, "vortex_street": vortex_street}
+    def family():
+        bounds = _box(cfg["bounds"], "flow.bounds") if cfg.get("bounds") is not None else WAKE_BOUNDS
+        members = cfg.get("members") or {}
+        if not members:
+            raise ConfigError("flow.members must name at least one member, e.g. {fourier: {type: fourier, weight: 1}}")
+        built = {name: _family_member(m, f"flow.members.{name}", bounds, device) for name, m in members.items()}
+        if len(built) == 1:
+            return next(iter(built.values()))
+        weights = [float(members[name].get("weight", 1.0)) for name in built]
+        try:
+            return MixtureFamily(list(built.values()), weights, bounds)
+        except ValueError as e:
+            raise ConfigError(f"flow.members.*.weight: {e}") from e
+
+    kinds = {"grid": grid, "abc": abc, "uniform": uniform, "vortex_street": vortex_street, "family": family}
     flow = _pick(cfg, "flow", kinds)()
     scale = float(cfg.get("speed_scale", 1.0))
     if scale <= 0:
@@ -91,7 +133,18 @@ def build_task(cfg: Mapping, flow: FlowField):
             raise ConfigError(f"task.target must be a point [x, y, z] for a fixed-target task, got {target}")
         return FixedTargetTask(target=target, start=start)
 
-    return _pick(cfg, "task", {"regions": regions, "symmetric": symmetric, "fixed_target": fixed_target})()
+    def family():
+        kw = {k: cfg[k] for k in ("distance", "swim_speed") if cfg.get(k) is not None}
+        kw |= {k: float(cfg[k]) for k in ("margin", "regions_share", "full_speed_share") if cfg.get(k) is not None}
+        if cfg.get("start") is not None:
+            kw |= {"start_region": _box(cfg["start"], "task.start"), "target_region": _box(cfg["target"], "task.target")}
+        try:
+            return FamilyTask(flow.bounds, **kw)
+        except (TypeError, ValueError) as e:
+            raise ConfigError(f"task (type: family): {e}") from e
+
+    kinds = {"regions": regions, "symmetric": symmetric, "fixed_target": fixed_target, "family": family}
+    return _pick(cfg, "task", kinds)()
 
 
 def _flow_strength(value):
