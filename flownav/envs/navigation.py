@@ -133,7 +133,7 @@ class NavigationEnv(EnvBase):
         if self._family:
             if misalignment_deg:
                 raise ValueError("misalignment_deg rotates one flow; a flow family draws its own rotations (angle_deg)")
-            base.allocate(num_envs, self.device)
+            base = self.flow = base.bind(num_envs, self.device)
         self.task = task if task is not None else RegionTask()
         self.dt, self.time_limit = float(dt), float(time_limit)
         # Episodes are truncated after a whole number of steps; time is that count times dt (no float drift).

@@ -1,7 +1,7 @@
 """Families of flows: every swimmer of a batch gets its own flow, drawn anew at each of its resets.
 
 A :class:`FlowFamily` is a :class:`~flownav.flows.FlowField` whose parameters live per env slot. The
-environment calls :meth:`FlowFamily.allocate` once (``num_envs`` slots), :meth:`FlowFamily.resample`
+environment takes its own copy with :meth:`FlowFamily.bind` (``num_envs`` slots), calls :meth:`FlowFamily.resample`
 for the slots it resets, and ``velocity(pos, t, idx)`` / ``in_obstacle(pos, idx)`` where row ``i`` of
 ``pos`` belongs to slot ``idx[i]`` (slot ``i`` when ``idx`` is None). All members share one domain box
 (``bounds``); time is the episode's own (a family has no global period: members draw their phases).
@@ -37,6 +37,7 @@ Members (parameter ranges are the constructor's arguments; ``conf/flow/family_*.
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable, Sequence
 
@@ -85,6 +86,13 @@ class FlowFamily(FlowField):
         self.params: dict[str, Tensor] = {}
 
     # ---- what the environment calls
+    def bind(self, num_slots: int, device="cpu") -> FlowFamily:
+        """This family with ``num_slots`` slots of its own: an env's copy (envs share a family, not its slots).
+        Shallow: base flows (a CFD grid) are shared, read-only."""
+        bound = copy.copy(self)
+        bound.allocate(num_slots, device)
+        return bound
+
     def allocate(self, num_slots: int, device="cpu") -> None:
         """Room for ``num_slots`` flows, filled with a fixed draw (the env resamples every slot at reset)."""
         self.num_slots = int(num_slots)
@@ -283,8 +291,7 @@ class MixtureFamily(FlowFamily):
         return self
 
     def allocate(self, num_slots, device="cpu"):
-        for m in self.members:
-            m.allocate(num_slots, device)
+        self.members = [m.bind(num_slots, device) for m in self.members]
         super().allocate(num_slots, device)
 
     def resample(self, idx, generator):
@@ -327,8 +334,7 @@ class SumFamily(FlowFamily):
 
     def allocate(self, num_slots, device="cpu"):
         self.num_slots = int(num_slots)
-        for m in self.members:
-            m.allocate(num_slots, device)
+        self.members = [m.bind(num_slots, device) for m in self.members]
 
     def resample(self, idx, generator):
         for m in self.members:
