@@ -137,7 +137,10 @@ def build_task(cfg: Mapping, flow: FlowField):
         kw = {k: cfg[k] for k in ("distance", "swim_speed") if cfg.get(k) is not None}
         kw |= {k: float(cfg[k]) for k in ("margin", "regions_share", "full_speed_share") if cfg.get(k) is not None}
         if cfg.get("start") is not None:
-            kw |= {"start_region": _box(cfg["start"], "task.start"), "target_region": _box(cfg["target"], "task.target")}
+            kw |= {
+                "start_region": _box(cfg["start"], "task.start"),
+                "target_region": _box(cfg["target"], "task.target"),
+            }
         try:
             return FamilyTask(flow.bounds, **kw)
         except (TypeError, ValueError) as e:

@@ -14,7 +14,7 @@ Members (parameter ranges are the constructor's arguments; ``conf/flow/family_*.
 
   with the wave vector k in a uniformly random direction, |k| = 2 pi / lambda, lambda log-uniform in
   ``wavelength``; a_k a random unit vector orthogonal to k and b_k = k/|k| x a_k, so k.a_k = k.b_k = 0 and
-  div u = 0 exactly (each mode alone is a Beltrami field, curl u_k = |k| u_k). Amplitudes follow the
+  div u = 0 exactly (each mode alone is a Beltrami field, curl u_k = -|k| u_k). Amplitudes follow the
   spectrum A_k ~ |k|^-p (``spectrum`` = p), phases phi_k are uniform in [0, 2 pi), frequencies w_k
   uniform in +-``frequency``. The amplitudes are scaled so that the space-time RMS speed
   sqrt(sum A_k^2) equals a speed V drawn uniformly in ``speed`` (the pointwise maximum is at most sqrt(K) V).
