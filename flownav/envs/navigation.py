@@ -347,11 +347,11 @@ class NavigationEnv(EnvBase):
             return
         slots = torch.arange(self.num_envs, device=self.device) if idx is None else idx
         pos, t, n = self.pos[slots], (self.t0 + self.time)[slots], slots.numel()
-        points = [pos[None] + torch.eye(3, device=self.device)[:, None] * GRADIENT_STEP]  # [3 (j), n, 3]: + h e_j
+        points = pos[None] + torch.eye(3, device=self.device)[:, None] * GRADIENT_STEP  # [3 (j), n, 3]: + h e_j
         if self._target_flow:
-            points.append(self.target[slots][None])
-        rows = len(points[0]) + len(points) - 1
-        u = self._flow_at(torch.cat(points).reshape(-1, 3), t.repeat(rows), slots.repeat(rows)).view(rows, n, 3)
+            points = torch.cat((points, self.target[slots][None]))
+        rows = points.shape[0]
+        u = self._flow_at(points.reshape(-1, 3), t.repeat(rows), slots.repeat(rows)).view(rows, n, 3)
         grad = ((u[:3] - self.flow_vel[slots]) / GRADIENT_STEP).permute(1, 2, 0)  # [n, i (component), j (d/dx_j)]
         self.flow_grad = self.flow_grad.index_put((slots,), grad)
         if self._target_flow:
