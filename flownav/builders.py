@@ -12,10 +12,19 @@ from collections.abc import Mapping
 from flownav import schema
 from flownav.envs.navigation import NavigationEnv
 from flownav.envs.reward import RewardConfig
-from flownav.envs.tasks import DistanceTask, FixedTargetTask, RegionTask, SymmetricTask
+from flownav.envs.tasks import DistanceTask, FamilyTask, FixedTargetTask, RegionTask, SymmetricTask
 from flownav.errors import ConfigError
 from flownav.flows.analytic import ABCFlow, UniformFlow
-from flownav.flows.base import Box, FlowField, make_periodic
+from flownav.flows.base import WAKE_BOUNDS, Box, FlowField, make_periodic
+from flownav.flows.families import (
+    FlowFamily,
+    FourierFamily,
+    MixtureFamily,
+    SumFamily,
+    UniformFamily,
+    vortex_street_family,
+    wake_family,
+)
 from flownav.flows.grid import load_grid_flow
 from flownav.flows.transforms import RotatedFlow, ScaledFlow
 from flownav.paths import DEFAULT_FLOW_DATASET, resolve
@@ -32,6 +41,27 @@ def _box(value) -> Box:
 def _scale_pi(value):
     """Boxes of the ABC task are given in units of pi when ``in_pi`` is set."""
     return [[float(x) * math.pi for x in corner] for corner in value]
+
+
+def _family_member(cfg: Mapping, key: str, bounds: Box, device) -> FlowFamily:
+    """One member of a flow family (flownav/flows/families.py): its type and its constructor's arguments."""
+    args = {k: v for k, v in cfg.items() if k not in ("type", "weight")}
+    kind = cfg.get("type")
+    if kind == "sum":
+        parts = args.get("members") or {}
+        return SumFamily([_family_member(m, f"{key}.members.{n}", bounds, device) for n, m in parts.items()], bounds)
+
+    def wake(path=None, **kw):
+        return wake_family(load_grid_flow(resolve(path or DEFAULT_FLOW_DATASET), device=device), **kw)
+
+    makers = {"fourier": FourierFamily, "uniform": UniformFamily, "vortex_street": vortex_street_family, "wake": wake}
+    if kind not in makers:
+        raise ConfigError(f"{key}.type is {kind!r}; choose one of {sorted([*makers, 'sum'])}")
+    maker = makers[kind]
+    try:
+        return maker(bounds=bounds, **args)
+    except (TypeError, ValueError) as e:
+        raise ConfigError(f"{key} (type: {kind}): {e}") from e
 
 
 def build_flow(cfg: Mapping, device="cpu") -> FlowField:
@@ -73,7 +103,21 @@ def build_flow(cfg: Mapping, device="cpu") -> FlowField:
         except TypeError as e:
             raise ConfigError(f"flow.params: {e}") from e
 
-    kinds = {"grid": grid, "abc": abc, "uniform": uniform, "vortex_street": vortex_street, "zoo": zoo}
+    def family():
+        bounds = _box(cfg["bounds"]) if cfg.get("bounds") is not None else WAKE_BOUNDS
+        members = cfg.get("members") or {}
+        if not members:
+            raise ConfigError("flow.members must name at least one member, e.g. {fourier: {type: fourier, weight: 1}}")
+        built = {name: _family_member(m, f"flow.members.{name}", bounds, device) for name, m in members.items()}
+        if len(built) == 1:
+            return next(iter(built.values()))
+        weights = [float(members[name].get("weight", 1.0)) for name in built]
+        try:
+            return MixtureFamily(list(built.values()), weights, bounds)
+        except ValueError as e:
+            raise ConfigError(f"flow.members.*.weight: {e}") from e
+
+    kinds = {"grid": grid, "abc": abc, "uniform": uniform, "vortex_street": vortex_street, "zoo": zoo, "family": family}
     flow = kinds[cfg["type"]]()
     if cfg.get("periodic_axes"):
         try:
@@ -112,7 +156,27 @@ def build_task(cfg: Mapping, flow: FlowField):
         except ValueError as e:
             raise ConfigError(str(e)) from e
 
-    kinds = {"regions": regions, "symmetric": symmetric, "fixed_target": fixed_target, "distance": distance}
+    def family():
+        kw = {k: cfg[k] for k in ("distance", "swim_speed") if cfg.get(k) is not None}
+        kw |= {k: float(cfg[k]) for k in ("margin", "regions_share", "full_speed_share") if cfg.get(k) is not None}
+        if cfg.get("start") is not None:
+            kw |= {
+                "start_region": _box(cfg["start"]),
+                "target_region": _box(cfg["target"]),
+            }
+        try:
+            return FamilyTask(flow.bounds, **kw)
+        except (TypeError, ValueError) as e:
+            raise ConfigError(f"task (type: family): {e}") from e
+
+    kinds = {
+        "regions": regions,
+        "symmetric": symmetric,
+        "fixed_target": fixed_target,
+        "distance": distance,
+        "family": family,
+    }
+
     return kinds[cfg["type"]]()
 
 

@@ -236,6 +236,7 @@ FLOWS = {
     "abc": {k: Float() for k in ("A", "B", "C", "eps", "omega")} | {"bounds": Key(BOX, null=True)},
     "uniform": {"velocity": Key(FLOATS, size=3), "bounds": Key(BOX, null=True)},
     "zoo": {"name": Str(required=True), "bounds": Key(BOX, null=True)},  # params: the flow class's keywords
+    "family": {"bounds": Key(BOX, null=True)},  # members: checked by their constructors (flows/families.py)
     "vortex_street": {
         "period": Float(gt=0),
         "advection": Float(gt=0),
@@ -251,6 +252,15 @@ TASKS = {
     "regions": {"start": Key(BOX, required=True), "target": Key(BOX, required=True)},
     "symmetric": {"start": Key(BOX, required=True), "target": Key(BOX, required=True)},
     "fixed_target": {"start": Key(BOX, choices=("domain",), null=True), "target": Key(FLOATS, size=3, required=True)},
+    "family": {
+        "distance": Key(FLOATS, size=2, gt=0),
+        "margin": Float(ge=0),
+        "regions_share": Float(ge=0, le=1),
+        "start": Key(BOX, null=True),
+        "target": Key(BOX, null=True),
+        "swim_speed": Key(FLOATS, size=2, gt=0),
+        "full_speed_share": Float(ge=0, le=1),
+    },
     "distance": {
         "box": Key(BOX, choices=("domain",), null=True),
         "distance": Key(FLOATS, size=2, ge=0),

@@ -30,20 +30,25 @@ from flownav.envs.observations import (
     check_views,
     compute_views,
     needs_body_frame,
+    needs_gradient,
     needs_history,
     needs_phase,
+    needs_target_flow,
     observation_size,
 )
 from flownav.envs.reward import RewardConfig, step_reward
 from flownav.envs.tasks import RegionTask
 from flownav.errors import require_finite
 from flownav.flows.base import FlowField
+from flownav.flows.families import FlowFamily
 from flownav.flows.transforms import RotatedFlow, rotate_z
 
 # Action bounds of the paper (section 2.3.2): U in [0, U_max], dtheta, dpsi in rad per time unit.
 DTHETA_MAX = math.pi / 4
 DPSI_MAX = math.pi / 2
 FLOW_FIX = "the flow must be finite over the whole domain (a FunctionFlow's function, a dataset's frames)"
+# Forward-difference step of the privileged views' flow gradient (below the wake grid's spacing 0.25).
+GRADIENT_STEP = 0.05
 
 
 class Status(IntEnum):
@@ -65,7 +70,8 @@ class NavigationEnv(EnvBase):
             ``ego``, ``ego_up``, ...).
         dt: time step; time_limit: episode length in time units (truncation).
         u_max: the action's speed bound; swim_speed_scale multiplies the speed the swimmer
-            really gets (0.1 in the ABC test, where the policy still acts in [0, u_max]).
+            really gets (0.1 in the ABC test, where the policy still acts in [0, u_max]). A task with a
+            ``swim_speed(n, generator, device)`` method draws a further factor per episode.
         misalignment_deg: rotate the whole scene (flow, domain, obstacles, starts, targets,
             headings) about z through ``rotation_center``: the misaligned-wake test.
         random_flow_phase: start each episode at a random time of a periodic flow.
@@ -118,10 +124,18 @@ class NavigationEnv(EnvBase):
         self._ego = needs_body_frame(self.views)
         self._memory = needs_history(self.views)
         self._phase = needs_phase(self.views)
+        # Privileged views: the flow's gradient (and the flow at the target), sensed once per step.
+        self._gradient, self._target_flow = needs_gradient(self.views), needs_target_flow(self.views)
         self.angle = math.radians(misalignment_deg)
         self.rotation_center = tuple(rotation_center)
         base = flow.to(self.device)
         self.flow = RotatedFlow(base, misalignment_deg, rotation_center) if misalignment_deg else base
+        # A flow family holds one flow per slot, drawn at each reset (it draws its own rotations).
+        self._family = isinstance(base, FlowFamily)
+        if self._family:
+            if misalignment_deg:
+                raise ValueError("misalignment_deg rotates one flow; a flow family draws its own rotations (angle_deg)")
+            base = self.flow = base.bind(num_envs, self.device)
         self.task = task if task is not None else RegionTask()
         self.dt, self.time_limit = float(dt), float(time_limit)
         # Episodes are truncated after a whole number of steps; time is that count times dt (no float drift).
@@ -169,6 +183,8 @@ class NavigationEnv(EnvBase):
         self.pos, self.target, self.vel, self.flow_vel = z(3), z(3), z(3), z(3)
         self.theta, self.psi, self.time, self.t0 = z(), z(), z(), z()
         self.strength = torch.ones(B, device=dev)  # the episode's factor on the flow (flow_strength)
+        self.swim_scale = torch.full((B,), self.swim_speed_scale, device=dev)  # per slot: tasks may draw it
+        self.flow_grad, self.target_flow = torch.zeros(B, 3, 3, device=dev), z(3)  # privileged views only
         self.start_dist, self.dist, self.speed = z(), z(), z()
         self.status = torch.zeros(B, dtype=torch.int64, device=dev)
         self.steps = torch.zeros(B, dtype=torch.int64, device=dev)
@@ -184,11 +200,13 @@ class NavigationEnv(EnvBase):
 
     # ----------------------------------------------------------------- exact resume
     STATE = ("pos", "target", "vel", "flow_vel", "theta", "psi", "time", "t0", "strength", "start_dist", "dist",
-             "speed", "status", "steps", "flow_ring", "ring_ptr")  # fmt: skip
+             "speed", "status", "steps", "flow_ring", "ring_ptr", "swim_scale", "flow_grad", "target_flow")  # fmt: skip
 
     def state_dict(self) -> dict:
         """Everything a step depends on: the swimmers' state, the memory ring and its pointer, the RNG."""
         state = {k: getattr(self, k) for k in self.STATE}
+        if self._family:  # each slot's flow
+            state["flow_family"] = self.flow.state_dict()
         return state | {"num_envs": self.num_envs, "rng": self.rng.get_state()}
 
     def load_state_dict(self, state: dict) -> None:
@@ -201,11 +219,13 @@ class NavigationEnv(EnvBase):
         for k in self.STATE:
             v = state[k]
             setattr(self, k, v.to(self.device).clone() if torch.is_tensor(v) else v)
+        if self._family:
+            self.flow.load_state_dict(state["flow_family"])
         self.rng.set_state(state["rng"])
 
     # ----------------------------------------------------------------- sampling
-    def _sample_episodes(self, n: int):
-        """Starts, targets and headings for n new episodes, in the (possibly rotated) scene."""
+    def _sample_episodes(self, n: int, idx: Tensor | None = None):
+        """Starts, targets and headings for n new episodes (slots ``idx``), in the (possibly rotated) scene."""
         start, target = self.task.sample(n, self.rng, self.device)
         start, target = start.to(self.device, torch.float32), target.to(self.device, torch.float32)
         # Rejection: a start must lie in the domain, outside obstacles and outside the success ball.
@@ -213,7 +233,7 @@ class NavigationEnv(EnvBase):
         for _ in range(100):
             bad = (
                 ~base_flow.in_domain(start)
-                | base_flow.in_obstacle(start)
+                | (base_flow.in_obstacle(start, idx) if self._family else base_flow.in_obstacle(start))
                 | (base_flow.displacement(start, target).norm(dim=-1) <= self.reward_cfg.success_radius)
             )
             if not bad.any():
@@ -244,7 +264,7 @@ class NavigationEnv(EnvBase):
 
     def _flow_at(self, pos: Tensor, t: Tensor, idx: Tensor | None = None) -> Tensor:
         """The flow velocity each swimmer feels: the flow's, times its episode's strength (all or ``idx``)."""
-        u = self.flow.velocity(pos, t)
+        u = self.flow.velocity(pos, t, idx) if self._family else self.flow.velocity(pos, t)
         if self.flow_strength is None:
             return u
         s = self.strength if idx is None else self.strength[idx]
@@ -261,9 +281,14 @@ class NavigationEnv(EnvBase):
         # Out of place: tensors returned by earlier steps must keep their values.
         put = lambda old, new: old.index_put((idx,), new)  # noqa: E731
         if idx.numel():
-            start, target, theta, psi, t0, strength = self._sample_episodes(idx.numel())
+            if self._family:
+                self.flow.resample(idx, self.rng)
+            start, target, theta, psi, t0, strength = self._sample_episodes(idx.numel(), idx)
             if strength is not None:
                 self.strength = put(self.strength, strength)
+            if hasattr(self.task, "swim_speed"):  # drawn last: tasks without it keep their random streams
+                swim = self.task.swim_speed(idx.numel(), self.rng, self.device)
+                self.swim_scale = put(self.swim_scale, self.swim_speed_scale * swim)
             flow_vel = self._flow_at(start, t0, idx)
             require_finite(flow_vel, "the flow velocity at the start", FLOW_FIX, start)
             d = self.flow.displacement(start, target).norm(dim=-1)
@@ -286,6 +311,7 @@ class NavigationEnv(EnvBase):
             self.start_dist, self.dist = put(self.start_dist, d), put(self.dist, d)
             if self._memory:  # no past yet: the swimmer has been sensing its start flow
                 self.flow_ring[idx] = flow_vel[:, None, :]
+            self._sense_privileged(idx)
         return self._observe().update(self._not_done())
 
     def _not_done(self) -> dict:
@@ -299,7 +325,7 @@ class NavigationEnv(EnvBase):
         action = torch.max(torch.min(action, high), low)
         speed, dtheta, dpsi = action.unbind(-1)
         self.theta, self.psi = turn(self.theta, self.psi, dtheta, dpsi, self.dt)
-        self.speed = speed * self.swim_speed_scale
+        self.speed = speed * self.swim_scale
         swim = self.speed[:, None] * heading_vector(self.theta, self.psi)
         prev_pos = self.pos
         self.pos, _ = move(self.pos, swim, self.flow_vel, self.dt)
@@ -313,6 +339,7 @@ class NavigationEnv(EnvBase):
         if self._memory:
             self.ring_ptr = (self.ring_ptr + 1) % self.flow_ring.shape[1]
             self.flow_ring[:, self.ring_ptr] = self.flow_vel
+        self._sense_privileged()
 
         prev_dist = self.dist
         self.dist = self.flow.displacement(self.pos, self.target).norm(dim=-1)
@@ -350,6 +377,34 @@ class NavigationEnv(EnvBase):
         period = self.flow.period
         return torch.remainder((self.t0 + self.time) / period, 1.0) if period else None
 
+    def _sense_privileged(self, idx: Tensor | None = None) -> None:
+        """What only the simulator knows, for the privileged views, kept per slot (all or ``idx``): the flow's
+        gradient by forward differences from the flow the swimmer feels and the flow at the target, in one
+        look-up of 3 (or 4) points per swimmer."""
+        if not self._gradient:
+            return
+        slots = torch.arange(self.num_envs, device=self.device) if idx is None else idx
+        pos, t, n = self.pos[slots], (self.t0 + self.time)[slots], slots.numel()
+        points = pos[None] + torch.eye(3, device=self.device)[:, None] * GRADIENT_STEP  # [3 (j), n, 3]: + h e_j
+        if self._target_flow:
+            points = torch.cat((points, self.target[slots][None]))
+        rows = points.shape[0]
+        u = self._flow_at(points.reshape(-1, 3), t.repeat(rows), slots.repeat(rows)).view(rows, n, 3)
+        grad = ((u[:3] - self.flow_vel[slots]) / GRADIENT_STEP).permute(1, 2, 0)  # [n, i (component), j (d/dx_j)]
+        self.flow_grad = self.flow_grad.index_put((slots,), grad)
+        if self._target_flow:
+            self.target_flow = self.target_flow.index_put((slots,), u[3])
+
+    def _privileged_state(self) -> dict:
+        if not self._gradient:
+            return {}
+        return {
+            "flow_gradient": self.flow_grad,
+            "target_flow": self.target_flow,
+            "swim_speed": self.u_max * self.swim_scale,
+            "time_left": 1 - self.steps / self.max_steps,
+        }
+
     def _observe(self) -> TensorDict:
         state = State(
             to_target=self.flow.displacement(self.pos, self.target),
@@ -360,6 +415,7 @@ class NavigationEnv(EnvBase):
             frame=body_frame(self.theta, self.psi) if self._ego else None,  # skipped for geo-only runs
             flow_history=self._flow_history() if self._memory else None,
             flow_phase=self._flow_phase() if self._phase else None,
+            **self._privileged_state(),
         )
         data = compute_views(state, self.views)
         data.update(

@@ -20,6 +20,13 @@
   (cos, sin of 2 pi t / period; zeros for a flow without a period). What the simulator knows and the
   swimmer does not: a critic that sees the phase of the periodic wake can tell a vortex arriving from
   one leaving, and gives the actor less noisy advantages. The actor keeps its own view.
+* ``geo_priv`` (23, the generalist teacher's actor): ``geo_sincos`` plus the local flow velocity u (3),
+  its gradient du_i/dx_j (9, row-major, central differences of step ``GRADIENT_STEP`` in the env: 6
+  more look-ups), the swim speed U (the action's full speed times the swimmer's speed factor) and
+  log(U / (|u| + 0.05)), the swim-speed ratio against the local flow. A teacher that knows how the
+  flow varies around it and how strong it is against the flow can plan; an ego student imitates it.
+* ``geo_priv_critic`` (27, its asymmetric critic): ``geo_priv`` plus the fraction of the episode's time
+  left (what decides truncation, hence the value) and the flow velocity at the target.
 """
 
 from __future__ import annotations
@@ -46,6 +53,10 @@ class State:
     frame: Tensor | None  # body frame [N, 3, 3]; None when no ego view is asked for
     flow_history: Tensor | None = None  # [N, HISTORY_LEN, 3] past flow velocities, inertial; memory views only
     flow_phase: Tensor | None = None  # [N] flow time / period in [0, 1); None: no period (or not asked for)
+    flow_gradient: Tensor | None = None  # [N, 3, 3] du_i / dx_j; privileged views only
+    swim_speed: Tensor | None = None  # [N] the swimmer's full swim speed; privileged views only
+    time_left: Tensor | None = None  # [N] fraction of the time limit left; privileged views only
+    target_flow: Tensor | None = None  # [N, 3] flow velocity at the target; geo_priv_critic only
 
 
 # The memory of ``ego_mem``: HISTORY_LEN flow samples, HISTORY_STRIDE steps apart (newest first). With
@@ -84,6 +95,16 @@ def _privileged(s: State) -> Tensor:
     return torch.cat((_geo_sincos(s, s.velocity), s.flow, phase), -1)
 
 
+def _geo_priv(s: State) -> Tensor:
+    ratio = torch.log(s.swim_speed / (s.flow.norm(dim=-1) + 0.05))
+    extra = (s.flow, s.flow_gradient.flatten(1), s.swim_speed[:, None], ratio[:, None])
+    return torch.cat((_geo_sincos(s, s.velocity), *extra), -1)
+
+
+def _geo_priv_critic(s: State) -> Tensor:
+    return torch.cat((_geo_priv(s), s.time_left[:, None], s.target_flow), -1)
+
+
 VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "geo": (8, lambda s: _geo(s, s.velocity)),
     "ego": (6, lambda s: _ego(s, s.velocity)),
@@ -94,9 +115,13 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "geo_sincos": (9, lambda s: _geo_sincos(s, s.velocity)),
     "geo_flow_sincos": (9, lambda s: _geo_sincos(s, s.flow)),
     "privileged": (14, _privileged),
+    "geo_priv": (23, _geo_priv),
+    "geo_priv_critic": (27, _geo_priv_critic),
 }
 MEMORY_VIEWS = ("ego_mem",)
 PHASE_VIEWS = ("privileged",)
+GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic")  # the flow's gradient, swim speed and time left
+TARGET_FLOW_VIEWS = ("geo_priv_critic",)
 GEO_VIEWS = tuple(name for name in VIEWS if name.startswith("geo"))  # the teacher's kind: inertial frame
 
 
@@ -110,6 +135,14 @@ def needs_history(names) -> bool:
 
 def needs_phase(names) -> bool:
     return any(name in PHASE_VIEWS for name in names)
+
+
+def needs_gradient(names) -> bool:
+    return any(name in GRADIENT_VIEWS for name in names)
+
+
+def needs_target_flow(names) -> bool:
+    return any(name in TARGET_FLOW_VIEWS for name in names)
 
 
 def check_views(names) -> tuple[str, ...]:

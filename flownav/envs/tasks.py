@@ -2,11 +2,13 @@
 
 A sampler is anything with ``sample(n, generator, device) -> (start[n,3], target[n,3])``.
 The environment rejects starts that lie outside the domain, inside an obstacle or already
-within the success radius, and samples them again.
+within the success radius, and samples them again. A sampler may also have
+``swim_speed(n, generator, device) -> factor[n]``: each episode's factor on the swim speed.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import torch
@@ -101,3 +103,56 @@ class DistanceTask:
             if not todo.any():
                 return start, target
         raise ValueError(f"no target {self.low:g}-{self.high:g} away fits in {self.box} after {self.tries} tries")
+
+
+class FamilyTask:
+    """The generalist's training tasks: point-to-point anywhere, the paper's regions, random swim speeds.
+
+    * With probability ``regions_share``: start in ``start_region``, target in ``target_region`` (the paper's).
+    * Otherwise: start uniform in ``domain`` shrunk by ``margin`` on every side, target at a distance uniform in
+      ``distance`` in a direction uniform on the sphere, drawn again until it lies in the shrunk domain too.
+    * :meth:`swim_speed`: the swimmer's speed factor (on ``env.swim_speed_scale``), 1 with probability
+      ``full_speed_share``, else log-uniform in ``swim_speed``. With flows of characteristic speed 0.2-1.5,
+      factors 0.05-1 give swim-speed ratios U_max / V_flow from about 0.03 to 5 (still water: infinite).
+    """
+
+    def __init__(
+        self,
+        domain: Box,
+        distance: Sequence[float] = (4.0, 16.0),
+        margin: float = 1.0,
+        regions_share: float = 0.25,
+        start_region: Box = REGION_1,
+        target_region: Box = REGION_2,
+        swim_speed: Sequence[float] = (0.05, 1.0),
+        full_speed_share: float = 0.5,
+    ):
+        self.distance = tuple(float(d) for d in distance)
+        self.swim_range = tuple(float(s) for s in swim_speed)
+        if len(self.distance) != 2 or not 0 < self.distance[0] <= self.distance[1]:
+            raise ValueError(f"distance must be [low, high] with 0 < low <= high, got {list(distance)}")
+        if len(self.swim_range) != 2 or not 0 < self.swim_range[0] <= self.swim_range[1]:
+            raise ValueError(f"swim_speed must be [low, high] with 0 < low <= high, got {list(swim_speed)}")
+        for name, share in (("regions_share", regions_share), ("full_speed_share", full_speed_share)):
+            if not 0 <= share <= 1:
+                raise ValueError(f"{name} is a fraction in [0, 1], got {share}")
+        lo = tuple(x + margin for x in domain.lo)
+        hi = tuple(x - margin for x in domain.hi)
+        self.box = Box(lo, hi)  # raises when the margin leaves no room
+        if self.distance[0] > min(self.box.size):
+            raise ValueError(f"distance {list(distance)} does not fit the domain {domain} less margin {margin}")
+        self.anywhere = DistanceTask(self.box, self.distance)
+        self.regions = RegionTask(start_region, target_region)
+        self.regions_share, self.full_speed_share = float(regions_share), float(full_speed_share)
+
+    def sample(self, n: int, generator: torch.Generator | None = None, device="cpu") -> tuple[Tensor, Tensor]:
+        start, target = self.anywhere.sample(n, generator, device)
+        r_start, r_target = self.regions.sample(n, generator, device)
+        paper = torch.rand(n, 1, generator=generator, device=device) < self.regions_share
+        return torch.where(paper, r_start, start), torch.where(paper, r_target, target)
+
+    def swim_speed(self, n: int, generator: torch.Generator | None = None, device="cpu") -> Tensor:
+        lo, hi = (math.log(s) for s in self.swim_range)
+        factor = torch.exp(lo + (hi - lo) * torch.rand(n, generator=generator, device=device))
+        full = torch.rand(n, generator=generator, device=device) < self.full_speed_share
+        return torch.where(full, torch.ones_like(factor), factor)

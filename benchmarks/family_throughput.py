@@ -1,0 +1,127 @@
+"""Swimmer-steps per second of the env on each flow family against the plain CFD wake, side by side,
+and the generalist's training cost (wall time of finished runs).
+
+Run: ``python benchmarks/family_throughput.py [--threads 1] [--batch 4096] [--seconds 4]``. Writes
+``benchmarks/results/family_throughput.json``. ``python benchmarks/family_throughput.py --cost
+teacher=<run dir> --cost student=<run dir> ...`` writes the training runs' wall times (their
+``final_metrics.json``) to ``benchmarks/results/generalist_cost.json`` instead.
+
+Every case steps ``NavigationEnv.step_and_maybe_reset`` with random actions (resets included) on the flow
+config ``conf/flow/<name>.yaml`` and the task the generalist trains on (``task=family``; the wake alone:
+the paper's regions), with the teacher's view (``geo_sincos``) and with the generalist teacher's views
+(``geo_priv`` + ``geo_priv_critic``: 4 look-ups per step instead of 1). The machine is shared, so the cases
+take turns window by window and each keeps its best window; ratios are against ``cylinder`` with
+``geo_sincos`` measured in the same rounds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import torch
+from omegaconf import OmegaConf
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import machine, write_result  # noqa: E402
+
+from flownav.builders import build_env, build_flow, build_task  # noqa: E402
+from flownav.paths import REPO_ROOT  # noqa: E402
+
+FLOWS = ("cylinder", "family_current", "family_fourier", "family_wake", "family_vortex_street", "family_mix")
+VIEWS = {
+    "teacher view (geo_sincos)": ("geo_sincos",),
+    "privileged views (geo_priv + critic)": ("geo_priv", "geo_priv_critic"),
+}
+
+
+def make_stepper(flow_name: str, views, batch: int):
+    conf = REPO_ROOT / "conf"
+    flow = build_flow(OmegaConf.load(conf / "flow" / f"{flow_name}.yaml"))
+    task_name = "regions" if flow_name == "cylinder" else "family"
+    task = build_task(OmegaConf.load(conf / "task" / f"{task_name}.yaml"), flow)
+    env = build_env(OmegaConf.load(conf / "env" / "default.yaml"), flow, task, views, num_envs=batch, seed=0)
+    state = {"td": env.reset()}
+    action = env.action_spec.rand()
+
+    def step():
+        td = state["td"]
+        td["action"] = action
+        _, state["td"] = env.step_and_maybe_reset(td)
+
+    for _ in range(3):
+        step()
+    return step
+
+
+def window_rate(step, batch: int, seconds: float) -> float:
+    calls, start = 0, time.perf_counter()
+    while time.perf_counter() - start < seconds or calls < 3:
+        step()
+        calls += 1
+    return batch * calls / (time.perf_counter() - start)
+
+
+def run_cost(spec: str) -> dict:
+    """``name=<run dir>``: the wall time and frames a finished training run recorded."""
+    name, _, path = spec.partition("=")
+    final = json.loads((Path(path) / "final_metrics.json").read_text())
+    row = {"run": name, "run_dir": path, "wall_time_min": final["wall_time_s"] / 60}
+    for key in ("frames", "iterations", "eval/success_rate", "eval/student_success_rate"):
+        if final.get(key) is not None:
+            row[key] = final[key]
+    return row
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--batch", type=int, default=4096, help="swimmers (the generalist teacher's env.num_envs)")
+    parser.add_argument("--seconds", type=float, default=4.0, help="time per case, split in --rounds windows")
+    parser.add_argument("--rounds", type=int, default=4)
+    parser.add_argument("--flows", nargs="+", default=list(FLOWS))
+    parser.add_argument("--cost", action="append", default=[], help="name=<run dir> of a finished training run")
+    args = parser.parse_args()
+    if args.cost:
+        payload = {
+            "what": "wall time of the generalist's training runs (final_metrics.json of each run directory)",
+            "command": "python benchmarks/family_throughput.py " + " ".join(sys.argv[1:]),
+            "machine": machine(),
+            "results": [run_cost(spec) for spec in args.cost],
+            "targets_min": {"teacher": 60, "student": 20},
+        }
+        payload["headline"] = payload["results"][0]
+        write_result("generalist_cost", payload)
+        return
+    torch.set_num_threads(args.threads)
+    cases = {(f, v): make_stepper(f, views, args.batch) for f in args.flows for v, views in VIEWS.items()}
+    best = dict.fromkeys(cases, 0.0)
+    for _ in range(args.rounds):  # side by side: every case gets a window in every round
+        for key, step in cases.items():
+            best[key] = max(best[key], window_rate(step, args.batch, args.seconds / args.rounds))
+    plain = best.get(("cylinder", next(iter(VIEWS))))
+    rows = []
+    for (flow, view), rate in best.items():
+        row = {"flow": flow, "views": view, "swimmer_steps_per_s": rate}
+        if plain:
+            row["ratio_vs_plain_wake"] = rate / plain
+        rows.append(row)
+        print(f"{flow:>22} {view:>38}: {rate:>10,.0f} swimmer-steps/s" + (f" ({rate / plain:.2f}x)" if plain else ""))
+    payload = {
+        "what": "swimmer-steps/s of NavigationEnv.step_and_maybe_reset on each flow family vs the plain wake "
+        "(cylinder, regions task, geo_sincos), cases interleaved window by window, best window each",
+        "command": "python benchmarks/family_throughput.py " + " ".join(sys.argv[1:]),
+        "batch": args.batch,
+        "machine": machine(),
+        "results": rows,
+    }
+    mix = next((r for r in rows if r["flow"] == "family_mix" and "priv" in r["views"]), None)
+    payload["headline"] = mix
+    write_result("family_throughput", payload)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,266 @@
+"""Flow families, the family task and the privileged views of the generalist (docs/generalist.md)."""
+
+import math
+
+import pytest
+import torch
+from omegaconf import OmegaConf
+
+from flownav.builders import ConfigError, build_flow, build_task
+from flownav.envs import NavigationEnv
+from flownav.envs.observations import observation_size
+from flownav.envs.tasks import REGION_1, REGION_2, FamilyTask
+from flownav.flows import FunctionFlow, UniformFlow
+from flownav.flows.base import WAKE_BOUNDS, Cylinder
+from flownav.flows.families import (
+    FourierFamily,
+    MixtureFamily,
+    SumFamily,
+    TransformedFamily,
+    UniformFamily,
+    vortex_street_family,
+)
+from flownav.paths import REPO_ROOT
+
+
+def drawn(family, n, seed=0):
+    family.allocate(n)
+    family.resample(torch.arange(n), torch.Generator().manual_seed(seed))
+    return family
+
+
+def divergence(flow, pos, t, idx=None):
+    pos = pos.clone().requires_grad_(True)
+    u = flow.velocity(pos, t, idx)
+    return sum(torch.autograd.grad(u[:, i].sum(), pos, retain_graph=True)[0][:, i] for i in range(3)), u
+
+
+def test_fourier_modes_are_divergence_free_and_beltrami():
+    f = drawn(FourierFamily(modes=6, wavelength=(2.0, 20.0), frequency=1.0), 32)
+    pos, t = torch.rand(32, 3, dtype=torch.float64) * 20 - 5, torch.rand(32, dtype=torch.float64) * 50
+    f.params = {k: v.double() for k, v in f.params.items()}
+    div, u = divergence(f, pos, t)
+    assert u.abs().max() > 0.05
+    assert div.abs().max() < 1e-6  # k.a = k.b = 0 up to the float32 rounding of the drawn parameters
+    # One mode alone is a Beltrami field: curl u = -|k| u (b = k/|k| x a: left-handed).
+    one = FourierFamily(modes=1)
+    drawn(one, 4)
+    one.params = {k: v.double() for k, v in one.params.items()}
+    p = pos[:4].clone().requires_grad_(True)
+    u = one.velocity(p, t[:4])
+    J = torch.stack([torch.autograd.grad(u[:, i].sum(), p, retain_graph=True)[0] for i in range(3)], 1)  # du_i/dx_j
+    curl = torch.stack((J[:, 2, 1] - J[:, 1, 2], J[:, 0, 2] - J[:, 2, 0], J[:, 1, 0] - J[:, 0, 1]), -1)
+    kmag = one.params["k"][:, 0].norm(dim=-1, keepdim=True)
+    assert torch.allclose(curl, -kmag * u, atol=1e-6)
+
+
+def test_fourier_rms_speed_is_the_drawn_speed():
+    f = drawn(FourierFamily(modes=8, speed=(0.3, 0.9)), 3, seed=5)
+    n = 100_000
+    gen = torch.Generator().manual_seed(1)
+    pos, t = torch.rand(n, 3, generator=gen) * 200, torch.rand(n, generator=gen) * 500
+    for slot in range(3):
+        u = f.velocity(pos, t, torch.full((n,), slot))
+        rms = u.pow(2).sum(-1).mean().sqrt()
+        assert rms == pytest.approx(float(f.params["speed"][slot]), rel=0.03)
+        assert 0.3 <= float(f.params["speed"][slot]) <= 0.9
+
+
+def test_rows_follow_their_slots():
+    """velocity(pos[idx], t[idx], idx) is row for row the full evaluation's, for every member kind."""
+    base = FunctionFlow(
+        lambda p, t: torch.stack((1 + p[:, 1] * 0.1, torch.sin(p[:, 0] + t), p[:, 2] * 0), -1),
+        WAKE_BOUNDS,
+        1.0,
+        obstacles=[Cylinder((0.0, 0.0), 0.5)],
+        period=3.0,
+    )
+    members = [FourierFamily(), UniformFamily(), TransformedFamily([base, base])]
+    families = [*members, MixtureFamily(members, [1, 1, 1]), SumFamily([FourierFamily(), UniformFamily()])]
+    for family in families:
+        drawn(family, 16)
+        pos, t = torch.rand(16, 3) * 10, torch.rand(16) * 10
+        full = family.velocity(pos, t)
+        idx = torch.tensor([3, 7, 11])
+        assert torch.allclose(family.velocity(pos[idx], t[idx], idx), full[idx]), type(family).__name__
+        with pytest.raises(ValueError, match="one row per env slot"):
+            family.velocity(pos[idx], t[idx])
+
+
+def test_two_swimmers_of_one_batch_feel_different_flows_at_the_same_place_and_step():
+    flow = build_flow(OmegaConf.load("conf/flow/family_fourier.yaml"))
+    env = NavigationEnv(flow, task=FamilyTask(WAKE_BOUNDS), num_envs=4, views=("geo",), seed=0)
+    td = env.reset()
+    td["action"] = env.action_spec.rand()
+    env.step(td)
+    same = torch.tensor([[10.0, 0.0, 5.0]]).expand(4, 3)
+    u = env._flow_at(same, env.t0 + env.time)
+    assert (env.time == env.time[0]).all()
+    assert (u[0] - u[1]).norm() > 1e-3 and (u[2] - u[3]).norm() > 1e-3
+    # A reset of one slot draws a new flow for it and leaves the others' flows alone.
+    before = env._flow_at(same, env.t0 + env.time)
+    env.reset(td.set("_reset", torch.tensor([[True], [False], [False], [False]])))
+    after = env._flow_at(same, env.t0 + env.time)
+    assert (after[0] - before[0]).norm() > 1e-3 and torch.equal(after[1:], before[1:])
+
+
+def test_the_zero_current_member_is_still_water():
+    flow = UniformFamily(speed=(0.5, 1.0), still_share=1.0)
+    env = NavigationEnv(
+        flow,
+        task=FamilyTask(WAKE_BOUNDS, swim_speed=(0.2, 0.2), full_speed_share=0.0),
+        num_envs=64,
+        views=("geo",),
+        seed=1,
+    )
+    td = env.reset()
+    start = td["position"].clone()
+    td["action"] = torch.tensor([1.0, 0.0, 0.0]).expand(64, 3)
+    nxt = env.step(td)["next"]
+    assert torch.equal(env.flow_vel, torch.zeros(64, 3))
+    # The swimmer moves by its own swim velocity only: speed 0.2 for one step of dt.
+    step = (nxt["position"] - start).norm(dim=-1)
+    assert torch.allclose(step, torch.full((64,), 0.2 * env.dt), atol=1e-6)
+    # Uniform currents have the drawn strength, in every direction.
+    cur = drawn(UniformFamily(speed=(0.5, 1.0)), 2000)
+    s = cur.params["velocity"].norm(dim=-1)
+    assert s.min() >= 0.5 and s.max() <= 1.0
+    assert cur.params["velocity"].mean(0).norm() < 0.05
+
+
+def test_transformed_family_rotates_scales_and_moves_obstacles():
+    base = UniformFlow((1.0, 0.0, 0.0))
+    base.obstacles = (Cylinder((0.0, 0.0), 0.5),)
+    fam = drawn(TransformedFamily([base], angle_deg=(90, 90), strength=(0.5, 0.5), background=(0, 0), center=(9, 0)), 2)
+    u = fam.velocity(torch.tensor([[3.0, 1.0, 2.0], [15.0, -3.0, 0.0]]), torch.zeros(2))
+    assert torch.allclose(u, torch.tensor([[0.0, 0.5, 0.0]] * 2), atol=1e-6)
+    # The cylinder at (0, 0) turned by 90 degrees about (9, 0) sits at (9, -9).
+    inside = fam.in_obstacle(torch.tensor([[9.0, -9.0, 1.0], [0.0, 0.0, 1.0]]))
+    assert inside.tolist() == [True, False]
+    bg = drawn(TransformedFamily([base], angle_deg=(0, 0), strength=(0, 0), background=(0.3, 0.3)), 500)
+    v = bg.velocity(torch.zeros(500, 3), torch.zeros(500))
+    assert torch.allclose(v.norm(dim=-1), torch.full((500,), 0.3)) and v[:, 2].abs().max() == 0
+
+
+def test_vortex_street_family_draws_a_bank_of_different_streets():
+    fam = vortex_street_family(variants=2, seed=0)
+    a, b = fam.bases
+    assert a.gamma != b.gamma and a.T != b.T
+    drawn(fam, 8)
+    assert fam.velocity(torch.rand(8, 3) * 5 + 5, torch.zeros(8)).isfinite().all()
+
+
+def test_mixture_picks_members_by_weight():
+    slow, fast = UniformFamily(speed=(0.1, 0.1)), UniformFamily(speed=(0.9, 0.9))
+    mix = drawn(MixtureFamily([slow, fast], [1.0, 3.0]), 4000)
+    speed = mix.velocity(torch.zeros(4000, 3), torch.zeros(4000)).norm(dim=-1)
+    assert torch.allclose(speed[mix.params["member"] == 0], torch.tensor(0.1))
+    assert torch.allclose(speed[mix.params["member"] == 1], torch.tensor(0.9))
+    assert (mix.params["member"] == 1).float().mean() == pytest.approx(0.75, abs=0.03)
+
+
+def test_family_task_distances_directions_and_regions():
+    task = FamilyTask(WAKE_BOUNDS, distance=(4.0, 9.0), margin=1.0, regions_share=0.3)
+    start, target = task.sample(20_000, torch.Generator().manual_seed(0))
+    in_regions = REGION_1.contains(start) & REGION_2.contains(target)
+    assert in_regions.float().mean() == pytest.approx(0.3, abs=0.02)  # anywhere-pairs rarely land there
+    d = (target - start)[~in_regions]
+    assert d.norm(dim=-1).min() >= 4.0 - 1e-5 and d.norm(dim=-1).max() <= 9.0 + 1e-5
+    unit = d / d.norm(dim=-1, keepdim=True)
+    assert (unit[:, 2] > 0.9).any() and (unit[:, 2] < -0.9).any() and (unit[:, 0] < -0.9).any()
+    assert task.box.contains(start[~in_regions]).all() and task.box.contains(target[~in_regions]).all()
+    with pytest.raises(ValueError, match="distance"):
+        FamilyTask(WAKE_BOUNDS, distance=(30.0, 40.0))
+
+
+def test_swim_speed_factor_range_and_the_env_applies_it():
+    task = FamilyTask(WAKE_BOUNDS, swim_speed=(0.05, 1.0), full_speed_share=0.25)
+    s = task.swim_speed(40_000, torch.Generator().manual_seed(0))
+    assert s.min() >= 0.05 - 1e-6 and s.max() <= 1.0 + 1e-6
+    assert (s == 1).float().mean() == pytest.approx(0.25, abs=0.01)
+    drawn_ = torch.log(s[s < 1])
+    assert drawn_.median() == pytest.approx(0.5 * math.log(0.05), abs=0.05)  # log-uniform: median at the middle
+    env = NavigationEnv(
+        UniformFamily(speed=(0, 0)), task=task, num_envs=256, views=("geo_priv",), swim_speed_scale=2.0, seed=0
+    )
+    td = env.reset()
+    assert env.swim_scale.min() >= 2.0 * 0.05 - 1e-6 and env.swim_scale.max() <= 2.0 + 1e-6
+    assert (env.swim_scale == 2.0).any() and (env.swim_scale < 1.0).any()
+    assert torch.allclose(td["geo_priv"][:, 21], env.u_max * env.swim_scale)
+    start = td["position"].clone()
+    td["action"] = torch.tensor([1.0, 0.0, 0.0]).expand(256, 3)
+    moved = (env.step(td)["next", "position"] - start).norm(dim=-1)
+    assert torch.allclose(moved, env.swim_scale * env.dt, atol=1e-6)
+
+
+def test_privileged_views_on_a_linear_flow():
+    """u = M x + c: the gradient in geo_priv is M (forward differences are exact), the rest as documented."""
+    M = torch.tensor([[0.1, -0.2, 0.05], [0.3, 0.0, -0.1], [0.02, 0.04, -0.1]])
+    c = torch.tensor([0.4, -0.1, 0.2])
+    flow = FunctionFlow(lambda p, t: p @ M.T + c, WAKE_BOUNDS, 2.0)
+    env = NavigationEnv(flow, num_envs=8, views=("geo_priv", "geo_priv_critic", "geo_sincos"), time_limit=10.0, seed=0)
+    td = env.reset()
+    td["action"] = env.action_spec.rand()
+    td = env.step(td)["next"]
+    priv, critic = td["geo_priv"], td["geo_priv_critic"]
+    assert priv.shape[-1] == observation_size("geo_priv") == 23 and critic.shape[-1] == 27
+    assert torch.equal(priv[:, :9], td["geo_sincos"])
+    u = td["position"] @ M.T + c
+    assert torch.allclose(priv[:, 9:12], u, atol=1e-5)
+    assert torch.allclose(priv[:, 12:21].view(8, 3, 3), M.expand(8, 3, 3), atol=2e-3)
+    assert torch.allclose(priv[:, 21], torch.ones(8))  # swim speed u_max x 1
+    assert torch.allclose(priv[:, 22], torch.log(1.0 / (u.norm(dim=-1) + 0.05)), atol=1e-5)
+    assert torch.equal(critic[:, :23], priv)
+    assert torch.allclose(critic[:, 23], torch.full((8,), 1 - 1 / 50))  # one of 50 steps done
+    assert torch.allclose(critic[:, 24:], td["target"] @ M.T + c, atol=1e-5)
+
+
+def test_family_configs_build_and_bad_members_fail_with_the_key():
+    for name in ("family_fourier", "family_current", "family_vortex_street"):
+        flow = build_flow(OmegaConf.load(f"conf/flow/{name}.yaml"))
+        drawn(flow, 4)
+        assert flow.velocity(torch.rand(4, 3), torch.zeros(4)).isfinite().all()
+    task = build_task(OmegaConf.load("conf/task/family.yaml"), flow)
+    assert isinstance(task, FamilyTask) and task.regions_share == 0.25
+    bad = {"type": "family", "members": {"f": {"type": "fourierr"}}}
+    with pytest.raises(ConfigError, match=r"flow.members.f.type is 'fourierr'"):
+        build_flow(bad)
+    bad = {"type": "family", "members": {"f": {"type": "fourier", "speed": [1.0, 0.5]}}}
+    with pytest.raises(ConfigError, match=r"flow.members.f \(type: fourier\): speed must be"):
+        build_flow(bad)
+    with pytest.raises(ValueError, match="misalignment_deg"):
+        NavigationEnv(FourierFamily(), num_envs=2, views=("geo",), misalignment_deg=30)
+
+
+def test_a_generalist_student_imitates_a_privileged_teacher(tmp_path):
+    """DAgger takes the teacher's privileged view from its checkpoint and reads it from the same env."""
+    from hydra import compose, initialize_config_dir
+
+    import train
+    from flownav.agents.networks import DeterministicPolicy
+    from flownav.checkpoint import load_policy, save_policy_checkpoint
+    from flownav.envs.navigation import DPSI_MAX, DTHETA_MAX
+
+    low, high = [0.0, -DTHETA_MAX, -DPSI_MAX], [1.0, DTHETA_MAX, DPSI_MAX]
+    teacher = tmp_path / "teacher.pt"
+    save_policy_checkpoint(teacher, DeterministicPolicy(23, low, high, hidden=(8,)), "geo_priv", "teacher")
+    tiny = ["flow=family_current", "algo.iterations=1", "algo.num_envs=16", "algo.steps_per_iteration=10",
+            "algo.updates_per_iteration=2", "algo.batch_size=32", "algo.hidden=[8]", "algo.final_eval_episodes=0",
+            "logger=csv", "logger.progress=false", "threads=1", f"teacher_checkpoint={teacher}"]  # fmt: skip
+    with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
+        cfg = compose("config", overrides=["+experiment=generalist_student_mem", *tiny])
+    final = train.run(cfg, tmp_path / "run")
+    assert final["frames"] == 160
+    _, payload = load_policy(tmp_path / "run" / "checkpoints" / "last.pt", expect_obs="ego_mem")
+    assert payload["meta"]["teacher_checkpoint"] == str(teacher)
+
+
+def test_family_benchmark_code_path_runs():
+    import importlib.util
+
+    path = REPO_ROOT / "benchmarks" / "family_throughput.py"
+    spec = importlib.util.spec_from_file_location("family_throughput", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    step = bench.make_stepper("family_fourier", ("geo_priv", "geo_priv_critic"), 8)
+    assert bench.window_rate(step, 8, 0.01) > 0
