@@ -1,4 +1,4 @@
-"""Shared helpers of the benchmarks: machine description and the JSON result file."""
+"""Shared helpers of the benchmarks: machine description, the JSON result file, an env stepped in place."""
 
 from __future__ import annotations
 
@@ -37,3 +37,18 @@ def write_result(name: str, payload: dict) -> Path:
     print(json.dumps({"headline": payload.get("headline")}, indent=2))
     print(f"wrote {path}")
     return path
+
+
+def env_stepper(env, warmup: int = 3):
+    """A function that steps ``env`` once (one fixed random action, auto-reset), after ``warmup`` steps."""
+    state = {"td": env.reset()}
+    action = env.action_spec.rand()
+
+    def step():
+        td = state["td"]
+        td["action"] = action
+        _, state["td"] = env.step_and_maybe_reset(td)
+
+    for _ in range(warmup):
+        step()
+    return step

@@ -20,12 +20,13 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine, write_result  # noqa: E402
-from env_throughput import DT_FRAME, make_grid  # noqa: E402
+from common import env_stepper, machine, write_result  # noqa: E402
+from env_throughput import DT_FRAME, SHAPE  # noqa: E402
 
 from flownav.envs.navigation import NavigationEnv  # noqa: E402
 from flownav.errors import require_finite  # noqa: E402
 from flownav.flows import GridFlow  # noqa: E402
+from flownav.flows.synthetic import synthetic_wake_grid  # noqa: E402
 
 
 def fastest(fn, number: int, repeats: int) -> float:
@@ -39,18 +40,11 @@ def main():
     parser.add_argument("--repeats", type=int, default=20)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
-    grid, origin, spacing = make_grid()
-    flow = GridFlow(torch.from_numpy(grid), origin, spacing, DT_FRAME, periodic=(False, False, True))
+    T, nx, ny, nz = SHAPE
+    flow = GridFlow(**synthetic_wake_grid(frames=T, cells=(nx, ny), span_cells=nz, span=20.0, frame_dt=DT_FRAME))
     env = NavigationEnv(flow, num_envs=args.batch, views=("geo", "ego"), seed=0)
-    state = {"td": env.reset()}
-    action = env.action_spec.rand()
-
-    def step():
-        td = state["td"]
-        td["action"] = action
-        _, state["td"] = env.step_and_maybe_reset(td)
-
-    tensors = (action, torch.rand(args.batch, 3), torch.rand(args.batch))  # action, flow velocity, reward
+    step = env_stepper(env)
+    tensors = (env.action_spec.rand(), torch.rand(args.batch, 3), torch.rand(args.batch))  # action, flow, reward
 
     def checks():
         for x in tensors:

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine, write_result  # noqa: E402
+from common import env_stepper, machine, write_result  # noqa: E402
 
 from flownav.envs import NavigationEnv  # noqa: E402
 from flownav.envs.tasks import REGION_1, REGION_2  # noqa: E402
@@ -53,17 +53,7 @@ def best_window_rate(step, per_call: int, seconds: float, windows: int = 5) -> f
 
 def bench_batched(flow: GridFlow, batch: int, seconds: float) -> float:
     env = NavigationEnv(flow, num_envs=batch, views=("geo", "ego"), seed=0)
-    state = {"td": env.reset()}
-    action = env.action_spec.rand()
-
-    def step():
-        td = state["td"]
-        td["action"] = action
-        _, state["td"] = env.step_and_maybe_reset(td)
-
-    for _ in range(3):
-        step()
-    return best_window_rate(step, batch, seconds)
+    return best_window_rate(env_stepper(env), batch, seconds)
 
 
 class ReferenceSwimmer:

@@ -26,7 +26,7 @@ import torch
 from omegaconf import OmegaConf
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine, write_result  # noqa: E402
+from common import env_stepper, machine, write_result  # noqa: E402
 
 from flownav.builders import build_env, build_flow, build_task  # noqa: E402
 from flownav.paths import REPO_ROOT  # noqa: E402
@@ -44,17 +44,7 @@ def make_stepper(flow_name: str, views, batch: int):
     task_name = "regions" if flow_name == "cylinder" else "family"
     task = build_task(OmegaConf.load(conf / "task" / f"{task_name}.yaml"), flow)
     env = build_env(OmegaConf.load(conf / "env" / "default.yaml"), flow, task, views, num_envs=batch, seed=0)
-    state = {"td": env.reset()}
-    action = env.action_spec.rand()
-
-    def step():
-        td = state["td"]
-        td["action"] = action
-        _, state["td"] = env.step_and_maybe_reset(td)
-
-    for _ in range(3):
-        step()
-    return step
+    return env_stepper(env)
 
 
 def window_rate(step, batch: int, seconds: float) -> float:

@@ -3,44 +3,19 @@ of PPO and DAgger lives on it, and a tiny training runs on CUDA when there is on
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
+from tiny import TINY_PPO, compose_train
 
 from flownav.builders import ConfigError
 from flownav.devices import check_on_device, resolve_device
 
-CONF = str(Path(__file__).resolve().parents[1] / "conf")
-TINY = [
-    "+experiment=teacher",
-    "flow=uniform",
-    "flow.velocity=[0.0,0.0,0.0]",
-    "task.start=[[5.0,0.0,5.0],[6.0,1.0,6.0]]",
-    "task.target=[[7.0,0.0,5.0],[8.0,1.0,6.0]]",
-    "env.num_envs=32",
-    "env.dt=0.5",
-    "env.time_limit=4.0",
-    "algo.rollout_steps=8",
-    "algo.epochs=1",
-    "algo.minibatch_size=128",
-    "algo.total_frames=512",
-    "algo.eval_every=2",
-    "algo.eval_episodes=8",
-    "algo.final_eval_episodes=16",
-    "algo.actor.hidden=[8]",
-    "algo.critic.hidden=[8]",
-    "logger=csv",
-    "logger.progress=false",
-    "logger.figure_episodes=2",
-    "threads=1",
-]
+TINY = [*TINY_PPO, "algo.eval_every=2", "algo.eval_episodes=8", "algo.final_eval_episodes=16"]
+TINY += ["logger.figure_episodes=2"]
 
 
 def make_cfg(*overrides):
-    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
-        return compose("config", overrides=[*TINY, *overrides])
+    return compose_train(*TINY, *overrides)
 
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA")

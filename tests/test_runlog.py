@@ -8,24 +8,15 @@ import math
 from pathlib import Path
 
 import pytest
-from hydra import compose, initialize_config_dir
+from tiny import TINY_PPO, compose_train
 
 from flownav.runlog import run_summary
 
-CONF = str(Path(__file__).resolve().parents[1] / "conf")
-
 # Still water, targets about 2 D away, 3 iterations of 64 swimmers x 16 steps, periodic evaluation every 3.
 TINY = [
-    "+experiment=teacher",
-    "flow=uniform",
-    "flow.velocity=[0.0,0.0,0.0]",
-    "task.start=[[5.0,0.0,5.0],[6.0,1.0,6.0]]",
-    "task.target=[[7.0,0.0,5.0],[8.0,1.0,6.0]]",
+    *TINY_PPO,
     "env.num_envs=64",
-    "env.dt=0.5",
-    "env.time_limit=4.0",
     "algo.rollout_steps=16",
-    "algo.epochs=1",
     "algo.minibatch_size=512",
     "algo.total_frames=3072",
     "algo.eval_every=3",
@@ -33,10 +24,7 @@ TINY = [
     "algo.final_eval_episodes=50",
     "algo.actor.hidden=[16]",
     "algo.critic.hidden=[16]",
-    "logger=csv",
-    "logger.progress=false",
     "logger.figure_episodes=3",
-    "threads=1",
 ]
 
 NEW_KEYS = [
@@ -52,8 +40,7 @@ NEW_KEYS = [
 
 
 def make_cfg(*overrides):
-    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
-        return compose("config", overrides=[*TINY, *overrides])
+    return compose_train(*TINY, *overrides)
 
 
 def test_tiny_ppo_run_logs_dashboard_keys_figure_and_summary(tmp_path):

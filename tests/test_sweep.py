@@ -15,6 +15,7 @@ import pytest
 import torch
 import yaml
 from hydra import compose, initialize_config_dir
+from tiny import TINY_PPO
 
 from flownav.resume import resolve_resume
 from flownav.sweep import summarize_sweep, write_sweep_summary
@@ -22,27 +23,6 @@ from flownav.sweep import summarize_sweep, write_sweep_summary
 ROOT = Path(__file__).resolve().parents[1]
 CONF = str(ROOT / "conf")
 
-TINY_PPO = [
-    "+experiment=teacher",
-    "flow=uniform",
-    "flow.velocity=[0.0,0.0,0.0]",
-    "task.start=[[5.0,0.0,5.0],[6.0,1.0,6.0]]",
-    "task.target=[[7.0,0.0,5.0],[8.0,1.0,6.0]]",
-    "env.num_envs=32",
-    "env.dt=0.5",
-    "env.time_limit=4.0",
-    "algo.rollout_steps=8",
-    "algo.epochs=1",
-    "algo.minibatch_size=128",
-    "algo.total_frames=512",
-    "algo.eval_every=0",
-    "algo.final_eval_episodes=40",
-    "algo.actor.hidden=[8]",
-    "algo.critic.hidden=[8]",
-    "logger=csv",
-    "logger.progress=false",
-    "threads=1",
-]
 
 
 def _fake_job(sweep, name, overrides, final):
