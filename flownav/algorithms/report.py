@@ -180,7 +180,7 @@ def main(argv=None):
     c = sub.add_parser("curves", help="mean +- std training curves over seeds")
     c.add_argument("--group", nargs="+", action="append", required=True, metavar=("LABEL", "RUN_DIR"))
     c.add_argument("--key", action="append", default=None, help="metrics.csv column(s)")
-    c.add_argument("--out", default="results/figures/reward_curves.png")
+    c.add_argument("--out", required=True, help="the PNG to write (results/figures/... only when shipping)")
     args = p.parse_args(argv)
     if args.cmd == "eval":
         from flownav.builders import ConfigError
