@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
+from tiny import DRIFT_TASK, compose_train
 
 from flownav.builders import ConfigError
 from flownav.checkpoint import load_checkpoint, save_policy_checkpoint
@@ -45,11 +46,6 @@ PPO_TINY = [
 ]
 
 
-def compose_train(*overrides):
-    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
-        return compose("config", overrides=list(overrides))
-
-
 def tree_digest(*paths: Path) -> dict:
     """sha256 of every file under the given paths (what must stay byte-identical)."""
     out = {}
@@ -76,11 +72,7 @@ def teacher_ckpt(tmp_path_factory):
 def dagger_cfg(teacher, *overrides):
     return compose_train(
         "+experiment=student",
-        "flow=uniform",
-        "flow.velocity=[0.1,0.0,0.0]",
-        "task.start=[[5.0,0.0,5.0],[6.0,1.0,6.0]]",
-        "task.target=[[7.0,0.0,5.0],[8.0,1.0,6.0]]",
-        "env.time_limit=20.0",
+        *DRIFT_TASK,
         "algo.num_envs=32",
         "algo.steps_per_iteration=20",
         "algo.updates_per_iteration=10",

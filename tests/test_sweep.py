@@ -15,7 +15,7 @@ import pytest
 import torch
 import yaml
 from hydra import compose, initialize_config_dir
-from tiny import TINY_PPO
+from tiny import DRIFT_TASK, TINY_PPO
 
 from flownav.resume import resolve_resume
 from flownav.sweep import summarize_sweep, write_sweep_summary
@@ -117,11 +117,7 @@ class PreemptOnce(Callback):
 
 TINY_DAGGER = [
     "+experiment=student",
-    "flow=uniform",
-    "flow.velocity=[0.1,0.0,0.0]",
-    "task.start=[[5.0,0.0,5.0],[6.0,1.0,6.0]]",
-    "task.target=[[7.0,0.0,5.0],[8.0,1.0,6.0]]",
-    "env.time_limit=20.0",
+    *DRIFT_TASK,
     "algo.iterations=4",
     "algo.num_envs=32",
     "algo.steps_per_iteration=40",

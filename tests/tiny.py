@@ -18,6 +18,15 @@ STILL_WATER_TASK = [
     "task.target=[[7.0,0.0,5.0],[8.0,1.0,6.0]]",
 ]
 
+# DAgger students: a weak current along x, so passive drift fails and the teacher's steering matters.
+DRIFT_TASK = [
+    "flow=uniform",
+    "flow.velocity=[0.1,0.0,0.0]",
+    "task.start=[[5.0,0.0,5.0],[6.0,1.0,6.0]]",
+    "task.target=[[7.0,0.0,5.0],[8.0,1.0,6.0]]",
+    "env.time_limit=20.0",
+]
+
 # 2 iterations of 32 swimmers x 8 steps, networks of 8 units, CSV logging only.
 TINY_PPO = [
     "+experiment=teacher",
