@@ -1,7 +1,20 @@
-"""Deterministic batched evaluation (``rollout``), statistics (``metrics``), the paper's experiments
+"""The evaluation protocol (``protocol.evaluate``: one seed rule, one summary), deterministic batched
+episodes (``rollout``), statistics (``metrics``), the paper's experiments
 (``experiments``) and their report (``report``). Entry point: ``evaluate.py``."""
 
 from flownav.evaluation.metrics import subregion_counts, summarize, wilson_interval
+from flownav.evaluation.protocol import EVAL_SEED, EvalSpec, Evaluation, env_seed, evaluate
 from flownav.evaluation.rollout import Episodes, run_episodes
 
-__all__ = ["Episodes", "run_episodes", "subregion_counts", "summarize", "wilson_interval"]
+__all__ = [
+    "EVAL_SEED",
+    "Episodes",
+    "EvalSpec",
+    "Evaluation",
+    "env_seed",
+    "evaluate",
+    "run_episodes",
+    "subregion_counts",
+    "summarize",
+    "wilson_interval",
+]
