@@ -93,25 +93,44 @@ def safe_torch_load(path, safe_globals=()):
 
 
 # ----------------------------------------------------------------------------- training state (exact resume)
-def training_state(env, optimizer, counters: dict, **extra) -> dict:
-    """What every trainer's ``last.pt`` carries to resume bit for bit: counters, optimiser, torch RNG, env state."""
-    return {
-        **counters,
-        "optimizer": optimizer.state_dict(),
-        "rng": {"torch": torch.get_rng_state()},
-        "env": env.state_dict(),
-        **extra,
-    }
+def training_state(env, optimizer, counters: dict, generators: dict | None = None, **extra) -> dict:
+    """What every trainer's ``last.pt`` carries to resume bit for bit: counters, optimiser, torch RNG (and the
+    trainer's own ``generators``, by name), env state, and the trainer's ``extra`` entries."""
+    rng = {"torch": torch.get_rng_state()} | {k: g.get_state() for k, g in (generators or {}).items()}
+    return {**counters, "optimizer": optimizer.state_dict(), "rng": rng, "env": env.state_dict(), **extra}
 
 
-def restore_training_state(payload: dict, policy, optimizer, env) -> dict:
-    """Put the policy, optimiser, env state and torch RNG of a ``last.pt`` back; return its train_state."""
+def restore_training_state(payload: dict, policy, optimizer, env, generators: dict | None = None) -> dict:
+    """Put the policy, optimiser, env state and RNGs of a ``last.pt`` back; return its train_state."""
     st = payload["train_state"]  # checked by load_resume_checkpoint
     policy.load_state_dict(payload["policy"]["state_dict"])
     optimizer.load_state_dict(st["optimizer"])
     env.load_state_dict(st["env"])
     torch.set_rng_state(st["rng"]["torch"])
+    for name, g in (generators or {}).items():
+        g.set_state(st["rng"][name])
     return st
+
+
+class RunCheckpoints:
+    """A training run's checkpoints (``<run>/checkpoints/last.pt``, ``best.pt``), written and resumed one way for
+    every trainer: the policy with its view and role; ``meta`` with the run's resolved config, counters and
+    metrics; the training state (:func:`training_state`) with the trainer's own entries."""
+
+    def __init__(self, directory, policy, obs: str, role: str, config: dict, env, optimizer, generators=None):
+        self.directory, self.policy, self.obs, self.role, self.config = Path(directory), policy, obs, role, config
+        self.env, self.optimizer, self.generators = env, optimizer, dict(generators or {})
+
+    def save(self, name: str, counters: dict, metrics: dict, meta: dict | None = None, **extra) -> Path:
+        """Write ``name`` (``counters``: frames, iteration, wall_time; ``extra``: the trainer's resume entries)."""
+        train_state = training_state(self.env, self.optimizer, counters, self.generators, **extra)
+        info = {"config": self.config, "frames": counters["frames"], "iteration": counters["iteration"]}
+        info |= {"metrics": metrics, **(meta or {})}
+        return save_policy_checkpoint(self.directory / name, self.policy, self.obs, self.role, info, train_state)
+
+    def restore(self, payload: dict) -> dict:
+        """Continue from a ``last.pt`` (:func:`load_resume_checkpoint`'s payload); return its train_state."""
+        return restore_training_state(payload, self.policy, self.optimizer, self.env, self.generators)
 
 
 RESUME_ONLY = ("env", "buffer")  # train_state entries a shipped copy leaves out (only a resumed run reads them)

@@ -1,4 +1,4 @@
-"""What every trainer checks after an update."""
+"""What every trainer shares: the check after an update, and the logged keys of an evaluation."""
 
 from __future__ import annotations
 
@@ -23,3 +23,10 @@ def require_finite_update(trainer: str, iteration: int, losses: dict, model: nn.
             f"{trainer} iteration {iteration}: {', '.join(bad[:3])}{' ...' if len(bad) > 3 else ''} became NaN or "
             f"infinite; training stopped ({kept}); {fix}"
         )
+
+
+def eval_metrics(summary: dict, prefix: str = "eval/") -> dict:
+    """The logged keys of an evaluation's summary (:func:`flownav.evaluation.protocol.evaluate`): episodes,
+    success_rate, mean_success_time (None without a success) and rate_<failure cause>, under ``prefix``."""
+    out = {f"{prefix}{k}": summary[k] for k in ("episodes", "success_rate", "mean_success_time")}
+    return out | {f"{prefix}rate_{name}": failure["rate"] for name, failure in summary["failures"].items()}
