@@ -2,10 +2,11 @@
 
 One iteration, read top to bottom in :func:`train`:
 
-1. **Collect.** ``num_envs`` swimmers start fresh episodes and run ``steps_per_iteration`` steps
-   (finished episodes restart in place). At each step the env emits the student's view (``ego``) and
-   the teacher's view (``geo``) of the *same* state; the teacher labels the state with its
-   deterministic action; the swimmer executes the student's action, or the teacher's with probability
+1. **Collect.** A TorchRL ``Collector``, as for PPO: ``num_envs`` swimmers start fresh episodes and run
+   ``steps_per_iteration`` steps (finished episodes restart in place). At each step the env emits the
+   student's view (``ego``) and the teacher's view (``geo``) of the *same* state; the behaviour policy
+   (:class:`~flownav.agents.mixture.TeacherStudentMixture`) labels the state with the teacher's
+   deterministic action and executes the student's action, or the teacher's with probability
    ``beta_i = beta.initial * beta.decay ** i`` (per swimmer and step). The paper lets the student act
    alone: ``beta.initial = 0``.
 2. **Aggregate.** The (student observation, teacher action) pairs go into a TorchRL replay buffer
@@ -33,24 +34,21 @@ from pathlib import Path
 import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
+from torchrl.collectors import Collector
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.data.replay_buffers.samplers import RandomSampler
 
+from flownav.agents.mixture import TeacherStudentMixture
 from flownav.agents.networks import DeterministicPolicy
-from flownav.algorithms.common import require_finite_update
+from flownav.algorithms.common import eval_metrics, require_finite_update
 from flownav.atomic import atomic_write_text
-from flownav.builders import ConfigError, build_env, build_flow, build_task
-from flownav.checkpoint import (
-    CheckpointError,
-    load_policy,
-    load_resume_checkpoint,
-    restore_training_state,
-    save_policy_checkpoint,
-    training_state,
-)
+from flownav.builders import build_env, build_flow, build_task
+from flownav.checkpoint import RunCheckpoints, load_policy, load_resume_checkpoint
 from flownav.devices import check_on_device, resolve_device
 from flownav.envs.observations import GEO_VIEWS, observation_size
-from flownav.episode_window import EpisodeWindow
+from flownav.episode_window import EpisodeWindow, with_episode_return
+from flownav.errors import CheckpointError, ConfigError
+from flownav.evaluation.protocol import EvalSpec, evaluate
 from flownav.paths import resolve
 from flownav.runlog import RunLogger, run_summary
 
@@ -100,29 +98,26 @@ def set_normalizer_from(policy: DeterministicPolicy, obs: torch.Tensor) -> None:
     norm.count.fill_(obs.shape[0])
 
 
-@torch.no_grad()
-def collect(env, student, teacher, student_view, teacher_view, steps, beta, gen) -> tuple[TensorDict, dict]:
-    """Run ``steps`` steps from fresh episodes; return the labelled states and episode statistics."""
-    td = env.reset()
-    obs, labels = [], []
-    window = EpisodeWindow(env.batch_size[0], env.device)
-    for _ in range(steps):
-        s_obs = td[student_view]
-        a_student = student(s_obs)
-        a_teacher = teacher(td[teacher_view])
-        obs.append(s_obs)
-        labels.append(a_teacher)
-        if beta > 0:
-            use_teacher = (torch.rand(a_student.shape[0], 1, generator=gen) < beta).to(a_student.device)
-            td["action"] = torch.where(use_teacher, a_teacher, a_student)
-        else:
-            td["action"] = a_student
-        out, td = env.step_and_maybe_reset(td)
-        window.add(out["next"])
-    data = TensorDict({"obs": torch.cat(obs), "teacher_action": torch.cat(labels)}, batch_size=[len(obs) * len(obs[0])])
-    # episodes, success_rate, mean_success_time, episode_length, rate_<failure cause>, episode_reward
-    stats = {k.removeprefix("train/").replace("success_time", "mean_success_time"): v for k, v in window.pop().items()}
-    return data, stats
+def make_collector(env, mixture: TeacherStudentMixture, steps: int, seed: int) -> Collector:
+    """Batches of ``steps`` steps of every swimmer, each from fresh episodes (the env reset at each batch)."""
+    collector = Collector(
+        with_episode_return(env),
+        mixture,
+        frames_per_batch=env.num_envs * steps,
+        total_frames=-1,
+        reset_at_each_iter=True,
+        trust_policy=True,
+        auto_register_policy_transforms=False,  # feed-forward policies: no InitTracker
+    )
+    env.set_seed(seed)  # the collector's own first reset drew episodes: the first batch's come from the seed
+    return collector
+
+
+def labelled_pairs(batch, student_view: str) -> TensorDict:
+    """A batch [B, T]'s (student observation, teacher action) pairs, step by step."""
+    obs, labels = batch[student_view].transpose(0, 1), batch["teacher_action"].transpose(0, 1)
+    pairs = {"obs": obs.reshape(-1, obs.shape[-1]), "teacher_action": labels.reshape(-1, labels.shape[-1])}
+    return TensorDict(pairs, batch_size=[obs.shape[0] * obs.shape[1]])
 
 
 def train(cfg, run_dir) -> dict:
@@ -172,56 +167,54 @@ def train(cfg, run_dir) -> dict:
         sampler=RandomSampler(),
         batch_size=batch_size,
     )
-    gen = torch.Generator().manual_seed(seed + 1)  # beta mixing
+    mixture = TeacherStudentMixture(student, teacher, student_view, teacher_view, seed=seed + 1)
+    collector = make_collector(env, mixture, steps, seed)
+    config = OmegaConf.to_container(cfg, resolve=True)
+    checkpoints = RunCheckpoints(
+        run_dir / "checkpoints", student, student_view, role, config, env, optim, {"beta": mixture.generator}
+    )
 
-    ckpt_dir = run_dir / "checkpoints"
     iteration, frames, wall_offset, history = 0, 0, 0.0, []
     if cfg.get("resume"):
         _, payload = load_resume_checkpoint(cfg.resume, expect_obs=student_view, needs=RESUME_NEEDS)
-        st = restore_training_state(payload, student, optim, env)
+        st = checkpoints.restore(payload)
         iteration, frames, wall_offset = int(st["iteration"]), int(st["frames"]), float(st["wall_time"])
         refill_buffer(buffer, st["buffer"], frames)
         history = list(st["history"])
-        gen.set_state(st["rng"]["beta"])
 
     check_on_device(device, student=student, teacher=teacher, env=env)
     logger = RunLogger(run_dir, cfg, total=iterations, start=iteration, wall_offset=wall_offset)
 
     def save(name: str, metrics: dict) -> Path:
         counters = {"iteration": iteration, "frames": frames, "wall_time": logger.elapsed}
-        train_state = training_state(env, optim, counters, buffer=buffer_contents(buffer), history=history)
-        train_state["rng"]["beta"] = gen.get_state()
-        meta = {
-            "config": OmegaConf.to_container(cfg, resolve=True),
-            "iteration": iteration,
-            "frames": frames,
-            "teacher_checkpoint": str(cfg.teacher_checkpoint),
-            "teacher_sha256": teacher_sha,
-            "metrics": metrics,
-        }
-        return save_policy_checkpoint(ckpt_dir / name, student, student_view, role, meta=meta, train_state=train_state)
+        teacher_meta = {"teacher_checkpoint": str(cfg.teacher_checkpoint), "teacher_sha256": teacher_sha}
+        return checkpoints.save(
+            name, counters, metrics, meta=teacher_meta, buffer=buffer_contents(buffer), history=history
+        )
 
     metrics: dict = dict(history[-1]) if history else {}
+    batches, window = iter(collector), EpisodeWindow()
     while iteration < iterations:
         t0 = time.time()
-        beta = beta_at(a, iteration)
         # 1. collect with the current student (mixed with the teacher by beta)
+        mixture.beta = beta = beta_at(a, iteration)
         student.eval()
-        data, ep = collect(env, student, teacher, student_view, teacher_view, steps, beta, gen)
+        batch = next(batches)  # [B, T]
+        window.add(batch["next"])
+        data = labelled_pairs(batch, student_view)
         with torch.no_grad():
             loss_onpolicy = float(imitation_loss(student(data["obs"]), data["teacher_action"]))
         t_collect = time.time() - t0
         # 2. aggregate, 3. normalise
         buffer.extend(data)
         frames += data.shape[0]
-        stored = buffer[:]
-        set_normalizer_from(student, stored["obs"])
+        set_normalizer_from(student, buffer[:]["obs"])
         # 4. fit eq. 9
         student.train()
         total = 0.0
         for _ in range(updates):
-            batch = buffer.sample()
-            loss = imitation_loss(student(batch["obs"]), batch["teacher_action"])
+            sample = buffer.sample()
+            loss = imitation_loss(student(sample["obs"]), sample["teacher_action"])
             optim.zero_grad(set_to_none=True)
             loss.backward()
             if a.grad_clip:
@@ -229,43 +222,31 @@ def train(cfg, run_dir) -> dict:
             optim.step()
             total += float(loss.detach())
         iteration += 1
-        require_finite_update("DAgger", iteration, {"train/loss": total}, student, ckpt_dir / "last.pt", NON_FINITE_FIX)
-        metrics = {
-            "iteration": iteration,
-            "train/loss": total / updates,
-            "train/loss_onpolicy": loss_onpolicy,
-            **{f"train/{k}": v for k, v in ep.items()},
-            "train/beta": beta,
-            "buffer/size": len(buffer),
-            "perf/collect_s": t_collect,
-            "perf/iteration_s": time.time() - t0,
-        }
-        history.append({k: v for k, v in metrics.items()})
+        last = checkpoints.directory / "last.pt"
+        require_finite_update("DAgger", iteration, {"train/loss": total}, student, last, NON_FINITE_FIX)
+        # the episodes that ended during collection: train/episodes, train/success_rate, train/mean_success_time, ...
+        episodes = {k.replace("success_time", "mean_success_time"): v for k, v in window.pop().items()}
+        metrics = {"iteration": iteration, "train/loss": total / updates, "train/loss_onpolicy": loss_onpolicy}
+        metrics |= episodes | {"train/beta": beta, "buffer/size": len(buffer)}
+        metrics |= {"perf/collect_s": t_collect, "perf/iteration_s": time.time() - t0}
+        history.append(dict(metrics))
         logger.log(iteration, metrics)
         if checkpoint_every and iteration % checkpoint_every == 0:
             save("last.pt", metrics)
+    collector.shutdown()
     save("last.pt", metrics)
     final = {"iterations": iteration, "frames": frames, "wall_time_s": logger.elapsed}
     final.update({k: v for k, v in metrics.items() if isinstance(v, int | float)})
 
     eval_episodes = int(a.get("final_eval_episodes", 0) or 0)
-    if eval_episodes > 0:
-        from flownav.evaluation.metrics import summarize
-        from flownav.evaluation.rollout import run_episodes
-
+    if eval_episodes > 0:  # the student and its teacher on the same held-out episodes
+        spec = EvalSpec(flow, task, cfg.env, eval_episodes, device=str(device))
         student.eval()
-        for name, pol, view in (("student", student, student_view), ("teacher", teacher, teacher_view)):
-
-            def make_env(n, chunk, view=view):
-                return build_env(cfg.env, flow, task, [view], num_envs=n, seed=10_000_019 + seed + chunk, device=device)
-
-            ep = run_episodes(pol, view, make_env, eval_episodes, chunk_size=10_000)
-            s = summarize(ep.status, ep.time)
-            final[f"eval/{name}_success_rate"] = s["success_rate"]
-            final[f"eval/{name}_mean_success_time"] = s["mean_success_time"]
-        logger.log(iteration, {k: v for k, v in final.items() if k.startswith("eval/") and v is not None})
+        for name, policy, view in (("student", student, student_view), ("teacher", teacher, teacher_view)):
+            final |= eval_metrics(evaluate(policy, view, spec).summary, prefix=f"eval/{name}_")
+        logger.log(iteration, {k: v for k, v in final.items() if k.startswith("eval/")})
     logger.summary(final)
-    logger.log_checkpoint(ckpt_dir / "last.pt")
+    logger.log_checkpoint(checkpoints.directory / "last.pt")
     logger.close()
     curve = [
         {k: h[k] for k in ("iteration", "train/loss", "train/loss_onpolicy", "train/success_rate")} for h in history
@@ -282,5 +263,5 @@ def train(cfg, run_dir) -> dict:
         f"held-out {name} success": (final.get(f"eval/{name}_success_rate"), eval_episodes)
         for name in ("student", "teacher")
     }
-    logger.write_summary(run_summary(frames, logger.elapsed, held_out, {"last": ckpt_dir / "last.pt"}))
+    logger.write_summary(run_summary(frames, logger.elapsed, held_out, {"last": checkpoints.directory / "last.pt"}))
     return final
