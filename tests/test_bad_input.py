@@ -48,7 +48,7 @@ def files(tmp_path_factory) -> dict:
     root = tmp_path_factory.mktemp("bad")
     small = DeterministicPolicy(observation_size("geo_sincos"), ACTION_LOW, action_high(), hidden=(16,), n_outputs=6)
     f = {"marker": root / "marker", "small": save_policy_checkpoint(root / "small.pt", small, "geo_sincos", "teacher")}
-    from flownav.algorithms.ppo import CriticNet
+    from flownav.agents.actor_critic import CriticNet
 
     actor = DeterministicPolicy(observation_size("geo_sincos"), ACTION_LOW, action_high(), hidden=(64, 64), n_outputs=6)
     critic = {"critic": CriticNet(observation_size("geo_sincos"), [32], "tanh").state_dict()}

@@ -5,7 +5,7 @@ import importlib.util
 
 import torch
 
-from flownav.algorithms.ppo import make_actor_critic
+from flownav.agents.actor_critic import make_actor_critic
 from flownav.envs import NavigationEnv
 from flownav.flows import UniformFlow
 from flownav.flows.base import WAKE_BOUNDS

@@ -142,8 +142,10 @@ def test_teacher_of_the_wrong_view_is_refused(tmp_path):
 
 def test_beta_one_executes_the_teacher(teacher_ckpt):
     from flownav.agents import DeterministicPolicy
-    from flownav.algorithms.dagger import collect
+    from flownav.agents.mixture import TeacherStudentMixture
+    from flownav.algorithms.dagger import make_collector
     from flownav.envs import NavigationEnv, RegionTask
+    from flownav.episode_window import EpisodeWindow
     from flownav.evaluation.scripted import ACTION_LOW, action_high
     from flownav.flows import Box, UniformFlow
 
@@ -157,7 +159,37 @@ def test_beta_one_executes_the_teacher(teacher_ckpt):
         env = NavigationEnv(
             UniformFlow((0.1, 0.0, 0.0)), task, num_envs=64, views=("ego", "geo"), seed=0, time_limit=12.0
         )
-        data, stats[beta] = collect(env, student, teacher, "ego", "geo", 60, beta, torch.Generator().manual_seed(0))
-        assert data["obs"].shape == (64 * 60, 6) and data["teacher_action"].shape == (64 * 60, 3)
-        assert stats[beta]["episodes"] >= 64
-    assert stats[1.0]["success_rate"] > 0.9 > stats[0.0]["success_rate"]
+        mixture = TeacherStudentMixture(student, teacher, "ego", "geo", seed=0)
+        mixture.beta = beta
+        batch = next(iter(make_collector(env, mixture, 60, seed=0)))
+        assert batch["ego"].shape == (64, 60, 6) and batch["teacher_action"].shape == (64, 60, 3)
+        with torch.no_grad():  # one call on [64, 60, d] instead of 60 on [64, d]: equal up to float rounding
+            executed = teacher(batch["geo"]) if beta else student(batch["ego"])
+            torch.testing.assert_close(batch["action"], executed, rtol=1e-5, atol=1e-6)
+            torch.testing.assert_close(batch["teacher_action"], teacher(batch["geo"]), rtol=1e-5, atol=1e-6)
+        window = EpisodeWindow()
+        window.add(batch["next"])
+        stats[beta] = window.pop()
+        assert stats[beta]["train/episodes"] >= 64
+    assert stats[1.0]["train/success_rate"] > 0.9 > stats[0.0]["train/success_rate"]
+
+
+def test_final_evaluation_is_the_protocols(teacher_ckpt, tmp_path):
+    """DAgger's final evaluation of the student (last.pt) and of its teacher is protocol.evaluate on one spec."""
+    import train
+    from flownav.algorithms.common import eval_metrics
+    from flownav.builders import build_flow, build_task
+    from flownav.evaluation.protocol import EvalSpec, evaluate
+
+    cfg = make_cfg(teacher_ckpt, "algo.iterations=1", "algo.updates_per_iteration=20", "algo.final_eval_episodes=200")
+    final = train.run(cfg, tmp_path)
+    flow = build_flow(cfg.flow)
+    spec = EvalSpec(flow, build_task(cfg.task, flow), cfg.env, 200)
+    for name, path, view in (
+        ("student", tmp_path / "checkpoints" / "last.pt", "ego"),
+        ("teacher", teacher_ckpt, "geo"),
+    ):
+        summary = evaluate(load_policy(path, expect_obs=view)[0], view, spec).summary
+        assert 0 < summary["successes"] < summary["episodes"]
+        expected = eval_metrics(summary, prefix=f"eval/{name}_")
+        assert {k: final[k] for k in expected} == expected

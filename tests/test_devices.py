@@ -48,17 +48,19 @@ def test_check_on_device_names_the_stray_tensor():
 def test_ppo_puts_networks_buffer_returns_and_eval_envs_on_cfg_device(monkeypatch, tmp_path):
     """Everything PPO builds (checked by the trainer itself) and every env it builds, evaluation included,
     is on cfg.device."""
+    from flownav import builders
     from flownav.algorithms import ppo
 
     built = []
-    real_build_env = ppo.build_env
+    real_build_env = builders.build_env
 
     def recording_build_env(*args, **kwargs):
         env = real_build_env(*args, **kwargs)
         built.append(env)
         return env
 
-    monkeypatch.setattr(ppo, "build_env", recording_build_env)
+    monkeypatch.setattr(ppo, "build_env", recording_build_env)  # the training env
+    monkeypatch.setattr(builders, "build_env", recording_build_env)  # the evaluation envs (protocol.EvalSpec)
     checked = []
     monkeypatch.setattr(ppo, "check_on_device", lambda device, **things: checked.append((device, things)))
     from train import run

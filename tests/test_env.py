@@ -454,7 +454,9 @@ def test_flow_strength_one_is_the_flow_itself_and_zero_is_still_water(wake_like_
 
 def test_flow_strength_scales_each_episode_by_its_own_draw():
     env = NavigationEnv(
-        UniformFlow((0.5, 0, 0), bounds=BIG), ListTask([[0.0, 0, 0]], [[50.0, 0, 0]]), num_envs=256,
+        UniformFlow((0.5, 0, 0), bounds=BIG),
+        ListTask([[0.0, 0, 0]], [[50.0, 0, 0]]),
+        num_envs=256,
         flow_strength=(0.2, 0.6),
     )
     td = env.reset()

@@ -3,6 +3,7 @@ resumes bit for bit; quick tries and refused resumes leave shipped files and oth
 
 from __future__ import annotations
 
+import csv
 import hashlib
 import math
 import os
@@ -89,6 +90,7 @@ def dagger_cfg(teacher, *overrides):
 
 # ----------------------------------------------------------------------------- non-finite values
 
+
 def bypass_validation(monkeypatch, trainer) -> None:
     """Switch off the up-front config checks (the trainer's and the schema's) so a bad value reaches the run."""
     from flownav import schema
@@ -96,6 +98,7 @@ def bypass_validation(monkeypatch, trainer) -> None:
     monkeypatch.setattr(trainer, "check_config", lambda cfg: None)
     for name in ("check_flow", "check_task", "check_env"):
         monkeypatch.setattr(schema, name, lambda *args, **kwargs: None)
+
 
 def test_nan_action_is_refused_by_name(wake_like_flow):
     env = NavigationEnv(wake_like_flow, num_envs=8, views=("geo",))
@@ -197,6 +200,12 @@ def interrupt_at(monkeypatch, module, k):
     monkeypatch.setattr(module, "require_finite_update", failing)
 
 
+def train_rows(metrics_csv: Path) -> list[dict]:
+    """The training episodes' columns (train/...) of every row of a run's metrics.csv."""
+    with open(metrics_csv, newline="") as f:
+        return [{k: v for k, v in r.items() if k.startswith("train/")} for r in csv.DictReader(f)]
+
+
 def max_weight_difference(a: Path, b: Path) -> float:
     # weights_only: a run's whole last.pt (env state, buffer, sampler) loads without unpickling code
     sa, sb = (torch.load(p, weights_only=True)["policy"]["state_dict"] for p in (a, b))
@@ -219,6 +228,9 @@ def test_ppo_resumes_bit_for_bit_after_a_failure(tmp_path, monkeypatch):
     assert max_weight_difference(a, b) == 0.0
     ca, cb = (load_checkpoint(p)["train_state"]["critic"] for p in (a, b))
     assert all(torch.equal(ca[k], cb[k]) for k in ca)
+    # Episodes span batches (60 steps, 16 per batch): those in flight at the checkpoint kept their running returns.
+    ra, rb = (train_rows(tmp_path / run / "metrics.csv") for run in ("straight", "part"))
+    assert len(ra) == 5 and ra == rb and all(r["train/episodes"] != "0.0" for r in ra)
     assert not (tmp_path / "unused").exists()
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import json
 from pathlib import Path
 
 import pytest
@@ -48,14 +47,12 @@ def rows(run_dir):
 
 
 def _success(policy, cfg, episodes=1000):
-    from flownav.algorithms.ppo import evaluate_policy
-    from flownav.builders import build_env, build_flow, build_task
+    from flownav.builders import build_flow, build_task
+    from flownav.evaluation.protocol import EvalSpec, evaluate
 
     flow = build_flow(cfg.flow)
-    task = build_task(cfg.task, flow)
-    view = str(cfg.obs.view)
-    make_env = lambda n, o: build_env(cfg.env, flow, task, [view], num_envs=n, seed=777 + o)  # noqa: E731
-    return evaluate_policy(policy, make_env, view, episodes)["success_rate"]
+    spec = EvalSpec(flow, build_task(cfg.task, flow), cfg.env, episodes, seed=777)
+    return evaluate(policy, str(cfg.obs.view), spec).success_rate
 
 
 @pytest.mark.slow
@@ -93,7 +90,7 @@ def test_deterministic_action_is_tanh_of_loc():
     from tensordict import TensorDict
     from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-    from flownav.algorithms.ppo import make_actor_critic
+    from flownav.agents.actor_critic import make_actor_critic
 
     cfg = make_cfg()
     low, high = torch.tensor([0.0, -0.785, -1.57]), torch.tensor([1.0, 0.785, 1.57])
@@ -105,8 +102,30 @@ def test_deterministic_action_is_tanh_of_loc():
     torch.testing.assert_close(td["action"], policy(obs), rtol=1e-5, atol=1e-5)
 
 
+def test_final_evaluation_is_the_protocols(tmp_path):
+    """PPO's final evaluation is protocol.evaluate of last.pt on the held-out spec: the same summary, and it is
+    not a trivial one (a stream that carries some swimmers to the target and most out of the domain)."""
+    from tiny import TINY_PPO, compose_train
+
+    from flownav.algorithms.common import eval_metrics
+    from flownav.builders import build_flow, build_task
+    from flownav.evaluation.protocol import EvalSpec, evaluate
+    from train import run
+
+    cfg = compose_train(*TINY_PPO, "flow.velocity=[1.0,0.0,0.0]", "env.time_limit=20.0")
+    final = run(cfg, tmp_path)
+    policy, _ = load_policy(tmp_path / "checkpoints" / "last.pt", expect_obs=str(cfg.obs.view))
+    flow = build_flow(cfg.flow)
+    spec = EvalSpec(flow, build_task(cfg.task, flow), cfg.env, int(cfg.algo.final_eval_episodes))
+    summary = evaluate(policy, str(cfg.obs.view), spec).summary
+    assert 0 < summary["successes"] < summary["episodes"] == 40
+    assert len([f for f in summary["failures"].values() if f["count"]]) == 2
+    expected = eval_metrics(summary)
+    assert {k: final[k] for k in expected} == expected
+
+
 def test_resume_continues_step_optimizer_and_normalizer(tmp_path):
-    from flownav.algorithms import ppo
+    from flownav.agents.actor_critic import make_actor_critic
     from train import run
 
     batch = 256 * 16
@@ -122,7 +141,7 @@ def test_resume_continues_step_optimizer_and_normalizer(tmp_path):
     flow = build_flow(cfg.flow)
     env = build_env(cfg.env, flow, build_task(cfg.task, flow), [cfg.obs.view], num_envs=256)
     low, high = env.action_spec.space.low[0], env.action_spec.space.high[0]
-    policy, _, critic_net, critic = ppo.make_actor_critic(
+    policy, _, critic_net, critic = make_actor_critic(
         cfg.obs.view, cfg.obs.view, low, high, cfg.algo.actor, cfg.algo.critic
     )
     params = list(policy.parameters()) + list(critic_net.parameters())
@@ -171,43 +190,3 @@ def test_resume_refuses_other_view(tmp_path):
         )
     with pytest.raises(ConfigError, match="geo"):
         run(cfg, tmp_path / "x")
-
-
-def test_report_eval_ships_the_best_checkpoint_by_held_out_success(tmp_path, capsys):
-    """`report eval --ship` evaluates every seed on the same held-out episodes and copies the best one; only
-    finished runs of the experiment's budget, on the full held-out episode count."""
-    from omegaconf import OmegaConf
-
-    from flownav.algorithms import report
-    from flownav.checkpoint import save_policy_checkpoint
-    from flownav.evaluation.scripted import HeadToTarget, Passive, fit_expert
-
-    overrides = [o for o in TINY if o.startswith(("flow", "task", "env."))]
-    config = OmegaConf.to_container(make_cfg(), resolve=True)  # the teacher experiment at its full budget
-    paths = []
-    for name, expert in (("drifts", Passive()), ("swims", HeadToTarget())):
-        policy, _ = fit_expert(expert, hidden=(32, 32), steps=400, batch=512, seed=0)
-        finished = {"frames": config["algo"]["total_frames"]}
-        meta = {"config": config}
-        paths.append(str(save_policy_checkpoint(tmp_path / f"{name}.pt", policy, "geo", "teacher", meta, finished)))
-    args = ["eval", "--name", "t", "--out", str(tmp_path / "t.json"), "--threads", "1"]
-    args += [a for o in overrides for a in ("--override", o)] + ["--ship", str(tmp_path / "shipped.pt")]
-
-    with pytest.raises(SystemExit, match=r"^error: --episodes 64 is below the 10000 a shipped result needs"):
-        report.main([*args, "--episodes", "64", *paths])
-    unfinished = dict(config, algo=dict(config["algo"], total_frames=4096))
-    policy, _ = fit_expert(Passive(), hidden=(8,), steps=1, batch=8, seed=0)
-    short = save_policy_checkpoint(
-        tmp_path / "short.pt", policy, "geo", "teacher", {"config": unfinished}, {"frames": 4096}
-    )
-    with pytest.raises(SystemExit, match=r"algo\.total_frames=4096 is below experiment teacher's 45000000"):
-        report.main([*args, *paths, str(short)])
-    assert not (tmp_path / "shipped.pt").exists() and not (tmp_path / "t.json").exists()
-
-    report.main([*args, *paths])
-    out = json.loads((tmp_path / "t.json").read_text())
-    rates = [r["success_rate"] for r in out["runs"]]
-    assert rates[0] == 0.0 and rates[1] > 0.5 and out["runs"][0]["episodes"] == 10_000
-    assert out["shipped"]["checkpoint"] == paths[1]
-    shipped, best = load_checkpoint(tmp_path / "shipped.pt"), load_checkpoint(paths[1])
-    assert all(torch.equal(shipped["policy"]["state_dict"][k], v) for k, v in best["policy"]["state_dict"].items())

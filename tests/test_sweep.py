@@ -24,7 +24,6 @@ ROOT = Path(__file__).resolve().parents[1]
 CONF = str(ROOT / "conf")
 
 
-
 def _fake_job(sweep, name, overrides, final):
     job = sweep / name
     (job / ".hydra").mkdir(parents=True)

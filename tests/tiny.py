@@ -1,6 +1,6 @@
 """Tiny training configs shared by the tests: still water, targets about 2 D away, a few swimmers and steps.
 
-    cfg = compose_train(*TINY_PPO, "algo.total_frames=1024")   # later overrides win
+cfg = compose_train(*TINY_PPO, "algo.total_frames=1024")   # later overrides win
 """
 
 from __future__ import annotations

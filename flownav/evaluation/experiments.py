@@ -133,9 +133,7 @@ class Suite:
         episodes = self.episodes(episodes)
         cap = self.cfg.policies[name].get("max_episodes")  # an expensive reference (the oracle) runs fewer
         episodes = min(episodes, int(cap)) if cap else episodes
-        return run_episodes(
-            policy, obs, make_env, episodes, self.chunk_size, record=record, progress=self.progress
-        )
+        return run_episodes(policy, obs, make_env, episodes, self.chunk_size, record=record, progress=self.progress)
 
     def env_cfg(self, spec) -> DictConfig:
         return OmegaConf.merge(self.cfg.env, spec.get("env") or {})
