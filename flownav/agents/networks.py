@@ -29,7 +29,10 @@ def mlp(in_dim: int, out_dim: int, hidden: Sequence[int] = (256, 256), activatio
 
 
 class ObsNormalizer(nn.Module):
-    """Running mean and variance (parallel Welford); frozen unless :meth:`update` is called."""
+    """Running mean and variance (parallel Welford); frozen unless :meth:`update` is called.
+
+    Part of the policy rather than an env transform (TorchRL's VecNorm): checkpoints, exports and the gym
+    wrapper carry the statistics with the weights, and DAgger sets them from its aggregated data."""
 
     def __init__(self, dim: int, clip: float = 10.0, eps: float = 1e-6):
         super().__init__()

@@ -64,7 +64,7 @@ def check_config(cfg) -> None:
         )
 
 
-def current(policy: DeterministicPolicy) -> DeterministicPolicy:
+def copy_for_evaluation(policy: DeterministicPolicy) -> DeterministicPolicy:
     """A fresh policy with the current weights, for evaluation. Its construction draws from torch's RNG, so a
     seed's training stream includes every evaluation."""
     copy = DeterministicPolicy(**policy.config).to(policy.normalizer.mean.device)
@@ -225,7 +225,7 @@ def train(cfg, run_dir) -> dict:
                 score = episodes["train/success_rate"] if episodes["train/episodes"] else float("nan")
                 if eval_every and eval_episodes and (iteration % eval_every == 0 or frames >= total_frames):
                     t_eval = time.time()
-                    held_out = evaluate(current(policy), obs_key, eval_spec, record=figure_episodes)
+                    held_out = evaluate(copy_for_evaluation(policy), obs_key, eval_spec, record=figure_episodes)
                     if held_out.episodes.trajectories:
                         figure = eval_trajectories_figure(held_out.episodes.trajectories, flow)
                         logger.log_figure(frames, "eval/trajectories", figure)
@@ -254,7 +254,7 @@ def train(cfg, run_dir) -> dict:
         final["minutes_to_target"] = time_to_target / 60
     if a.final_eval_episodes > 0:
         spec = EvalSpec(flow, task, cfg.env, int(a.final_eval_episodes), device=str(device))
-        final |= eval_metrics(evaluate(current(policy), obs_key, spec).summary)
+        final |= eval_metrics(evaluate(copy_for_evaluation(policy), obs_key, spec).summary)
         logger.log(frames, {k: v for k, v in final.items() if k.startswith("eval/")})
     logger.summary(final)
     logger.log_checkpoint(checkpoints.directory / "best.pt")
