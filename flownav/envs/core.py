@@ -4,6 +4,7 @@
     state = reset(state, idx, flow, settings, rng)     # new episodes in the slots idx
     state, reward = step(state, action, flow, settings)  # state.status says how each episode stands
     views = observe(state, flow, settings)              # {view name: [B, size]}
+    ended = (state.status != Status.RUNNING).nonzero().squeeze(-1)   # then reset(state, ended, ...)
 
 A step turns the heading, moves every swimmer with swim + flow velocity (eq. 1-3), then looks the flow
 up once at the new positions: that value is both the flow the next step moves with and the flow the
