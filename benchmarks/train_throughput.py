@@ -8,7 +8,7 @@ Writes benchmarks/results/train_throughput.json. Measured in one process, same t
 * ``agent_steps_per_s``: end-to-end PPO of the teacher config (Collector + GAE + ClipPPOLoss epochs +
   normaliser update), swimmer steps per second over ``--iterations`` iterations after one warm-up.
 * ``torchrl_collect_steps_per_s``: the Collector alone (policy sampling + env steps + auto-reset).
-* ``plain_collect_steps_per_s``: the same physics (flownav.envs.kinematics, the flow, the reward, the
+* ``plain_collect_steps_per_s``: the same physics (flownav.envs.core: the step, the episode sampler, the
   teacher's view) and the same policy MLP (normaliser, TanhNormal sample) as plain tensors, no TensorDict.
 * ``torchrl_over_plain``: torchrl / plain collection speed (1.0 = no overhead).
 * ``minutes_to_90pct``: wall time from the start of a teacher training run to the first logged
@@ -36,30 +36,23 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from common import machine, write_result  # noqa: E402
 
 from flownav.algorithms.report import compose_config  # noqa: E402
-from flownav.envs.kinematics import heading_vector, move, turn  # noqa: E402
-from flownav.envs.observations import State, compute_views  # noqa: E402
-from flownav.envs.reward import step_reward  # noqa: E402
+from flownav.envs import core  # noqa: E402
 
 
-def plain_collect(env, policy, view: str, steps: int, record: list | None = None) -> float:
-    """Collection with plain tensors: the env's physics functions, its reset sampler, the same MLP.
+def plain_collect(env, policy, steps: int, seed: int = 0, record: list | None = None) -> float:
+    """Collection with plain tensors: the physics functions ``env`` wraps (flownav.envs.core) on its settings and
+    flow, the same MLP, episodes drawn from a stream seeded with ``seed`` (those of an env built with that seed).
+    Every call starts new episodes.
 
     ``record`` (tests) receives each step's (observation, action).
     """
-    B, dt, cfg, flow = env.num_envs, env.dt, env.reward_cfg, env.flow
-    low, high = env.action_spec.space.low[0], env.action_spec.space.high[0]
-    pos, target, theta, psi, t0, _ = env._sample_episodes(B)  # the benchmark env has no flow_strength
-    time_ = torch.zeros(B)
-    flow_vel = flow.velocity(pos, t0)
-    vel = flow_vel.clone()
-    d0 = (target - pos).norm(dim=-1)
-    dist = d0.clone()
-
-    def observe():
-        s = State(target - pos, vel, flow_vel, theta, psi, None)
-        return compute_views(s, [view])[view]
-
-    obs = observe()
+    settings, flow, B, device = env.settings, env.flow, env.num_envs, env.device
+    (view,) = settings.views  # the policy's
+    low, high = core.action_bounds(settings, device)
+    rng = torch.Generator(device=device).manual_seed(seed)
+    state = core.initial_state(B, settings, device)
+    state = core.reset(state, torch.arange(B, device=device), flow, settings, rng)
+    obs = core.observe(state, flow, settings)[view]
     t_start = time.perf_counter()
     with torch.no_grad():
         for _ in range(steps):
@@ -71,33 +64,11 @@ def plain_collect(env, policy, view: str, steps: int, record: list | None = None
                 record.append((obs, action))
             logp = torch.distributions.Normal(loc, scale).log_prob(torch.atanh(u.clamp(-0.999, 0.999))).sum(-1)
             del logp
-            theta, psi = turn(theta, psi, action[:, 1], action[:, 2], dt)
-            swim = action[:, :1] * heading_vector(theta, psi)
-            pos, _ = move(pos, swim, flow_vel, dt)
-            time_ = time_ + dt
-            flow_vel = flow.velocity(pos, t0 + time_)
-            vel = swim + flow_vel
-            prev, dist = dist, (target - pos).norm(dim=-1)
-            success = dist < cfg.success_radius
-            reward = step_reward(cfg, prev, dist, d0, success, dt)
+            state, reward = core.step(state, action, flow, settings)
             del reward
-            done = success | ~flow.in_domain(pos) | flow.in_obstacle(pos) | (time_ >= env.time_limit - 1e-6)
-            if done.any():
-                idx = done.nonzero().squeeze(-1)
-                p, tg, th, ps, tt, _ = env._sample_episodes(idx.numel())
-                pos, target, theta, psi, t0 = (
-                    pos.index_put((idx,), p),
-                    target.index_put((idx,), tg),
-                    theta.index_put((idx,), th),
-                    psi.index_put((idx,), ps),
-                    t0.index_put((idx,), tt),
-                )
-                time_ = time_.index_put((idx,), torch.zeros_like(tt))
-                fv = flow.velocity(p, tt)
-                flow_vel, vel = flow_vel.index_put((idx,), fv), vel.index_put((idx,), fv)
-                d0 = d0.index_put((idx,), (tg - p).norm(dim=-1))
-                dist = dist.index_put((idx,), (tg - p).norm(dim=-1))
-            obs = observe()
+            ended = (state.status != core.Status.RUNNING).nonzero().squeeze(-1)
+            state = core.reset(state, ended, flow, settings, rng)
+            obs = core.observe(state, flow, settings)[view]
     return B * steps / (time.perf_counter() - t_start)
 
 
@@ -188,8 +159,8 @@ def main(argv=None):
 
     # 2. plain-torch collection, same physics and MLP
     plain_env = build_env(cfg.env, flow, task, [view], num_envs=B, seed=0)
-    plain_collect(plain_env, policy, view, T)
-    plain = sum(plain_collect(plain_env, policy, view, T) for _ in range(args.iterations)) / args.iterations
+    plain_collect(plain_env, policy, T)
+    plain = sum(plain_collect(plain_env, policy, T) for _ in range(args.iterations)) / args.iterations
 
     # 3. end-to-end PPO (a short training run through train())
     import tempfile

@@ -20,23 +20,32 @@ def _load(name):
 
 
 def test_plain_collection_loop_of_the_train_benchmark_is_the_env():
-    """The benchmark's plain-tensor loop sees the observations the env gives for the same actions, resets included,
-    so its speed ratio compares the same work."""
+    """The benchmark's plain-tensor loop sees exactly the observations the env gives for the same actions, resets
+    included, with the env's swim speed, flow strengths and time limit in steps: its speed ratio compares the same
+    work."""
     bench = _load("train_throughput")
     flow = UniformFlow((0.5, 0.0, 0.0), bounds=WAKE_BOUNDS)
 
     def make_env():
-        return NavigationEnv(flow, num_envs=32, views=("geo_sincos",), time_limit=2.0, seed=0)  # resets at step 10
+        return NavigationEnv(
+            flow,
+            num_envs=32,
+            views=("geo_sincos",),
+            time_limit=2.05,  # 10 steps of 0.2: resets at step 10
+            swim_speed_scale=0.5,
+            flow_strength=(0.5, 1.5),
+            seed=0,
+        )
 
     plain_env = make_env()
     low, high = plain_env.action_spec.space.low[0], plain_env.action_spec.space.high[0]
     hidden = {"hidden": [8, 8], "activation": "tanh", "init_scale": 0.5, "scale_lb": 1e-3, "output_gain": 0.01}
     policy, *_ = make_actor_critic("geo_sincos", "geo_sincos", low, high, hidden, {"hidden": [8], "activation": "tanh"})
     record = []
-    bench.plain_collect(plain_env, policy, "geo_sincos", 25, record)
+    bench.plain_collect(plain_env, policy, 25, record=record)
     env = make_env()
     td = env.reset()
     for step, (obs, action) in enumerate(record):
-        torch.testing.assert_close(td["geo_sincos"], obs, msg=lambda m, s=step: f"step {s}: {m}")
+        assert torch.equal(td["geo_sincos"], obs), f"step {step}"
         td["action"] = action
         _, td = env.step_and_maybe_reset(td)

@@ -1,0 +1,378 @@
+"""The physics of navigation as plain torch functions of a batch of swimmers.
+
+    state = initial_state(num_envs, settings, device)
+    state = reset(state, idx, flow, settings, rng)     # new episodes in the slots idx
+    state, reward = step(state, action, flow, settings)  # state.status says how each episode stands
+    views = observe(state, flow, settings)              # {view name: [B, size]}
+    ended = (state.status != Status.RUNNING).nonzero().squeeze(-1)   # then reset(state, ended, ...)
+
+A step turns the heading, moves every swimmer with swim + flow velocity (eq. 1-3), then looks the flow
+up once at the new positions: that value is both the flow the next step moves with and the flow the
+observations report, so each step costs exactly one flow look-up (plus the privileged views' probes).
+Episode time is the step count times dt, so the time limit is a whole number of steps.
+
+``flow`` is the scene's flow as :func:`scene_flow` prepares it (rotated for a misaligned wake, one flow
+per slot for a flow family); a family's slots are redrawn by :func:`reset` and live in the flow object.
+:class:`~flownav.envs.navigation.NavigationEnv` is the TorchRL adapter of these functions.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+from enum import IntEnum
+from typing import NamedTuple
+
+import torch
+from torch import Tensor
+
+from flownav.envs.kinematics import body_frame, heading_vector, move, step_reaches, turn, wrap_angle
+from flownav.envs.observations import (
+    HISTORY_LEN,
+    HISTORY_STRIDE,
+    State,
+    compute_views,
+    needs_body_frame,
+    needs_gradient,
+    needs_history,
+    needs_phase,
+    needs_target_flow,
+)
+from flownav.envs.reward import RewardConfig, step_reward
+from flownav.errors import require_finite
+from flownav.flows.base import FlowField
+from flownav.flows.families import FlowFamily
+from flownav.flows.transforms import RotatedFlow, rotate_z
+
+# Action bounds of the paper (section 2.3.2): U in [0, U_max], dtheta, dpsi in rad per time unit.
+DTHETA_MAX = math.pi / 4
+DPSI_MAX = math.pi / 2
+FLOW_FIX = "the flow must be finite over the whole domain (a FunctionFlow's function, a dataset's frames)"
+# Forward-difference step of the privileged views' flow gradient (below the wake grid's spacing 0.25).
+GRADIENT_STEP = 0.05
+
+
+class Status(IntEnum):
+    RUNNING = 0
+    SUCCESS = 1
+    LEFT_DOMAIN = 2
+    HIT_OBSTACLE = 3
+    TIMEOUT = 4
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Everything besides the flow and the state that episodes and steps depend on (NavigationEnv's arguments).
+
+    task: ``sample(n, generator, device) -> (start, target)``, optionally ``swim_speed(n, generator, device)``
+    (each episode's factor on ``swim_speed_scale``). views: the observation views (they decide what is sensed).
+    max_steps: the time limit in steps. misalignment_deg: the scene turned about z through ``rotation_center``.
+    flow_strength: ``(low, high)`` of each episode's factor on the flow, or None; flow_strength_full: the share
+    of episodes at 1.
+    """
+
+    task: object
+    views: tuple[str, ...]
+    dt: float
+    max_steps: int
+    u_max: float
+    swim_speed_scale: float
+    reward: RewardConfig
+    misalignment_deg: float = 0.0
+    rotation_center: tuple[float, float] = (0.0, 0.0)
+    random_flow_phase: bool = True
+    flow_strength: tuple[float, float] | None = None
+    flow_strength_full: float = 0.0
+
+
+@dataclass
+class Swimmers:
+    """The batch's state, one row per slot: everything a step reads, and what an exact resume saves.
+
+    ``flow_ring`` (memory views; ``[B, 0, 3]`` without) is written in place, so that a step's cost does not
+    grow with its length: a state handed to :func:`step` or :func:`reset` shares its ring with the result.
+    """
+
+    pos: Tensor  # [B, 3]
+    target: Tensor  # [B, 3]
+    vel: Tensor  # [B, 3] total velocity (swim + flow)
+    flow_vel: Tensor  # [B, 3] the flow at pos, now: the next step moves with it, the views report it
+    theta: Tensor  # [B] heading in the x-y plane
+    psi: Tensor  # [B] elevation
+    time: Tensor  # [B] steps * dt
+    t0: Tensor  # [B] the episode's start time in the flow
+    strength: Tensor  # [B] the episode's factor on the flow (read only with settings.flow_strength)
+    start_dist: Tensor  # [B]
+    dist: Tensor  # [B] distance to the target
+    speed: Tensor  # [B] the swim speed of the last step
+    status: Tensor  # [B] int64, a Status
+    steps: Tensor  # [B] int64, steps into the episode
+    flow_ring: Tensor  # [B, R, 3] the last R flow samples; all slots step together, so one pointer serves all
+    ring_ptr: int
+    swim_scale: Tensor  # [B] the factor on the action's speed (settings.swim_speed_scale times the task's draw)
+    flow_grad: Tensor  # [B, 3, 3] du_i / dx_j (privileged views)
+    target_flow: Tensor  # [B, 3] the flow at the target (privileged critic)
+
+
+STATE_FIELDS = tuple(f.name for f in fields(Swimmers))
+
+
+class Episodes(NamedTuple):
+    """New episodes' draws, in the (possibly rotated) scene; strength None without settings.flow_strength."""
+
+    start: Tensor
+    target: Tensor
+    theta: Tensor
+    psi: Tensor
+    t0: Tensor
+    strength: Tensor | None
+
+
+def scene_flow(flow: FlowField, settings: Settings, num_envs: int, device) -> FlowField:
+    """The flow the swimmers meet: on ``device``, turned by the misalignment, a family with one slot per swimmer."""
+    flow = flow.to(device)
+    if isinstance(flow, FlowFamily):
+        if settings.misalignment_deg:
+            raise ValueError("misalignment_deg rotates one flow; a flow family draws its own rotations (angle_deg)")
+        return flow.bind(num_envs, device)
+    if settings.misalignment_deg:
+        return RotatedFlow(flow, settings.misalignment_deg, settings.rotation_center)
+    return flow
+
+
+def initial_state(num_envs: int, settings: Settings, device) -> Swimmers:
+    """Every slot zero (call :func:`reset` before stepping)."""
+    z = lambda *s: torch.zeros(num_envs, *s, device=device)  # noqa: E731
+    ring = (HISTORY_LEN - 1) * HISTORY_STRIDE + 1 if needs_history(settings.views) else 0
+    return Swimmers(
+        pos=z(3),
+        target=z(3),
+        vel=z(3),
+        flow_vel=z(3),
+        theta=z(),
+        psi=z(),
+        time=z(),
+        t0=z(),
+        strength=torch.ones(num_envs, device=device),
+        start_dist=z(),
+        dist=z(),
+        speed=z(),
+        status=torch.zeros(num_envs, dtype=torch.int64, device=device),
+        steps=torch.zeros(num_envs, dtype=torch.int64, device=device),
+        flow_ring=z(ring, 3),
+        ring_ptr=0,
+        swim_scale=torch.full((num_envs,), settings.swim_speed_scale, device=device),
+        flow_grad=z(3, 3),
+        target_flow=z(3),
+    )
+
+
+def action_bounds(settings: Settings, device) -> tuple[Tensor, Tensor]:
+    """(low, high) of an action (U, dtheta, dpsi), ``[3]`` each."""
+    low = torch.tensor([0.0, -DTHETA_MAX, -DPSI_MAX], device=device)
+    high = torch.tensor([settings.u_max, DTHETA_MAX, DPSI_MAX], device=device)
+    return low, high
+
+
+def flow_at(flow: FlowField, settings: Settings, strength: Tensor, pos: Tensor, t: Tensor, idx=None) -> Tensor:
+    """The flow velocity the swimmers feel (all slots, or the slots ``idx``): the flow's, times the episode's
+    ``strength`` (a ``[B]`` tensor, the state's) when ``settings.flow_strength`` is set."""
+    u = flow.velocity(pos, t, idx) if isinstance(flow, FlowFamily) else flow.velocity(pos, t)
+    if settings.flow_strength is None:
+        return u
+    s = strength if idx is None else strength[idx]
+    return u * s[:, None]
+
+
+def sample_episodes(n: int, flow: FlowField, settings: Settings, rng: torch.Generator, idx=None) -> Episodes:
+    """Starts, targets, headings, flow start times and strengths of n new episodes (for the slots ``idx`` of a
+    family flow), drawn from ``rng`` in a fixed order: the task (rejected starts drawn again), theta, psi, t0
+    (random_flow_phase with a periodic flow), the strength."""
+    device = rng.device
+    start, target = settings.task.sample(n, rng, device)
+    start, target = start.to(device, torch.float32), target.to(device, torch.float32)
+    # Rejection in the unrotated scene: a start must lie in the domain, outside obstacles and the success ball.
+    base = flow.base if isinstance(flow, RotatedFlow) else flow
+    family = isinstance(flow, FlowFamily)
+    for _ in range(100):
+        bad = (
+            ~base.in_domain(start)
+            | (base.in_obstacle(start, idx) if family else base.in_obstacle(start))
+            | (base.displacement(start, target).norm(dim=-1) <= settings.reward.success_radius)
+        )
+        if not bad.any():
+            break
+        fresh, _ = settings.task.sample(n, rng, device)
+        start = torch.where(bad[:, None], fresh.to(start), start)
+    else:
+        raise ValueError("the task keeps sampling starts outside the domain or inside an obstacle")
+    theta = (torch.rand(n, generator=rng, device=device) * 2 - 1) * math.pi
+    psi = torch.asin(torch.rand(n, generator=rng, device=device) * 2 - 1)  # uniform on the sphere
+    if settings.misalignment_deg:
+        angle = math.radians(settings.misalignment_deg)
+        start = rotate_z(start, angle, settings.rotation_center)
+        target = rotate_z(target, angle, settings.rotation_center)
+        theta = theta + angle
+    if settings.random_flow_phase and flow.period:
+        t0 = torch.rand(n, generator=rng, device=device) * flow.period
+    else:
+        t0 = torch.zeros(n, device=device)
+    strength = None
+    if settings.flow_strength is not None:  # drawn last: the other draws are those of settings without it
+        low, high = settings.flow_strength
+        strength = low + (high - low) * torch.rand(n, generator=rng, device=device)
+        if settings.flow_strength_full:
+            full = torch.rand(n, generator=rng, device=device) < settings.flow_strength_full
+            strength = torch.where(full, torch.ones_like(strength), strength)
+    return Episodes(start, target, wrap_angle(theta), psi, t0, strength)
+
+
+def reset(state: Swimmers, idx: Tensor, flow: FlowField, settings: Settings, rng: torch.Generator) -> Swimmers:
+    """New episodes in the slots ``idx``; the other slots keep their state. Draws from ``rng``: a family's new
+    flows, then :func:`sample_episodes`, then the task's swim speeds."""
+    if not idx.numel():
+        return state
+    if isinstance(flow, FlowFamily):
+        flow.resample(idx, rng)
+    ep = sample_episodes(idx.numel(), flow, settings, rng, idx)
+    # Out of place: tensors handed out earlier (observations) keep their values.
+    put = lambda old, new: old.index_put((idx,), new)  # noqa: E731
+    strength, swim_scale = state.strength, state.swim_scale
+    if ep.strength is not None:
+        strength = put(strength, ep.strength)
+    if hasattr(settings.task, "swim_speed"):  # drawn last: tasks without it keep their random streams
+        swim_scale = put(swim_scale, settings.swim_speed_scale * settings.task.swim_speed(idx.numel(), rng, rng.device))
+    flow_vel = flow_at(flow, settings, strength, ep.start, ep.t0, idx)
+    require_finite(flow_vel, "the flow velocity at the start", FLOW_FIX, ep.start)
+    d = flow.displacement(ep.start, ep.target).norm(dim=-1)
+    zero, zero_int = torch.zeros_like(d), torch.zeros_like(idx)
+    if state.flow_ring.shape[1]:  # no past yet: the swimmer has been sensing its start flow
+        state.flow_ring[idx] = flow_vel[:, None, :]
+    state = replace(
+        state,
+        pos=put(state.pos, ep.start),
+        target=put(state.target, ep.target),
+        theta=put(state.theta, ep.theta),
+        psi=put(state.psi, ep.psi),
+        t0=put(state.t0, ep.t0),
+        time=put(state.time, zero),
+        speed=put(state.speed, zero),
+        status=put(state.status, zero_int),
+        steps=put(state.steps, zero_int),
+        flow_vel=put(state.flow_vel, flow_vel),
+        vel=put(state.vel, flow_vel),  # at rest relative to the fluid until the first action
+        start_dist=put(state.start_dist, d),
+        dist=put(state.dist, d),
+        strength=strength,
+        swim_scale=swim_scale,
+    )
+    return sense_privileged(state, flow, settings, idx)
+
+
+def step(state: Swimmers, action: Tensor, flow: FlowField, settings: Settings) -> tuple[Swimmers, Tensor]:
+    """One step of every slot with ``action`` ``[B, 3]`` (clipped to :func:`action_bounds`): the new state
+    (its ``status`` says which episodes ended and why) and the reward ``[B]`` of eq. 6. Ended episodes stay
+    as they ended until :func:`reset`."""
+    require_finite(action, "the action", "the policy produced it: check its weights and observations")
+    low, high = action_bounds(settings, action.device)
+    speed, dtheta, dpsi = torch.max(torch.min(action, high), low).unbind(-1)
+    theta, psi = turn(state.theta, state.psi, dtheta, dpsi, settings.dt)
+    speed = speed * state.swim_scale
+    swim = speed[:, None] * heading_vector(theta, psi)
+    moved, _ = move(state.pos, swim, state.flow_vel, settings.dt)
+    pos = flow.wrap(moved)  # periodic axes: back into the box
+    steps = state.steps + 1
+    time = steps * settings.dt
+    flow_vel = flow_at(flow, settings, state.strength, pos, state.t0 + time)
+    require_finite(flow_vel, "the flow velocity", FLOW_FIX, pos)
+    ring_ptr = state.ring_ptr
+    if state.flow_ring.shape[1]:
+        ring_ptr = (ring_ptr + 1) % state.flow_ring.shape[1]
+        state.flow_ring[:, ring_ptr] = flow_vel
+
+    radius = settings.reward.success_radius
+    dist = flow.displacement(pos, state.target).norm(dim=-1)
+    # Along the whole step, not only at its end: a fast step must not jump over the success ball.
+    success = step_reaches(flow.displacement(state.pos, state.target), moved - state.pos, radius)
+    left = ~flow.in_domain(pos)
+    hit = flow.in_obstacle(pos)
+    status = torch.full_like(state.status, Status.RUNNING)
+    status = torch.where(steps >= settings.max_steps, Status.TIMEOUT, status)
+    status = torch.where(hit, Status.HIT_OBSTACLE, status)
+    status = torch.where(left, Status.LEFT_DOMAIN, status)
+    status = torch.where(success, Status.SUCCESS, status)
+    reward = step_reward(settings.reward, state.dist, dist, state.start_dist, success, settings.dt)
+    require_finite(reward, "the reward", "check env.reward (alpha, success_bonus, time_penalty, ...)")
+    state = replace(
+        state,
+        pos=pos,
+        theta=theta,
+        psi=psi,
+        speed=speed,
+        steps=steps,
+        time=time,
+        flow_vel=flow_vel,
+        vel=swim + flow_vel,
+        ring_ptr=ring_ptr,
+        dist=dist,
+        status=status,
+    )
+    return sense_privileged(state, flow, settings), reward
+
+
+def sense_privileged(state: Swimmers, flow: FlowField, settings: Settings, idx=None) -> Swimmers:
+    """What only the simulator knows, for the privileged views, per slot (all or ``idx``): the flow's gradient
+    by forward differences from the flow the swimmer feels, and the flow at the target, in one look-up of 3
+    (or 4) points per swimmer. The state as it is when no view asks for them."""
+    if not needs_gradient(settings.views):
+        return state
+    target_flow = needs_target_flow(settings.views)
+    slots = torch.arange(state.pos.shape[0], device=state.pos.device) if idx is None else idx
+    pos, t, n = state.pos[slots], (state.t0 + state.time)[slots], slots.numel()
+    points = pos[None] + torch.eye(3, device=pos.device)[:, None] * GRADIENT_STEP  # [3 (j), n, 3]: + h e_j
+    if target_flow:
+        points = torch.cat((points, state.target[slots][None]))
+    rows = points.shape[0]
+    u = flow_at(flow, settings, state.strength, points.reshape(-1, 3), t.repeat(rows), slots.repeat(rows))
+    u = u.view(rows, n, 3)
+    grad = ((u[:3] - state.flow_vel[slots]) / GRADIENT_STEP).permute(1, 2, 0)  # [n, i (component), j (d/dx_j)]
+    state = replace(state, flow_grad=state.flow_grad.index_put((slots,), grad))
+    if target_flow:
+        state = replace(state, target_flow=state.target_flow.index_put((slots,), u[3]))
+    return state
+
+
+def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, Tensor]:
+    """The observation views of ``settings.views``, ``{name: [B, size]}`` (flownav.envs.observations)."""
+    views = settings.views
+    privileged = {}
+    if needs_gradient(views):
+        privileged = {
+            "flow_gradient": state.flow_grad,
+            "target_flow": state.target_flow,
+            "swim_speed": settings.u_max * state.swim_scale,
+            "time_left": 1 - state.steps / settings.max_steps,
+        }
+    seen = State(
+        to_target=flow.displacement(state.pos, state.target),
+        velocity=state.vel,
+        flow=state.flow_vel,
+        theta=state.theta,
+        psi=state.psi,
+        frame=body_frame(state.theta, state.psi) if needs_body_frame(views) else None,  # skipped for geo-only
+        flow_history=flow_history(state) if needs_history(views) else None,
+        flow_phase=flow_phase(state, flow) if needs_phase(views) else None,
+        **privileged,
+    )
+    return compute_views(seen, views)
+
+
+def flow_history(state: Swimmers) -> Tensor:
+    """The flow HISTORY_STRIDE steps apart, newest (now) first: ``[B, HISTORY_LEN, 3]``."""
+    lags = torch.arange(HISTORY_LEN, device=state.flow_ring.device) * HISTORY_STRIDE
+    return state.flow_ring[:, (state.ring_ptr - lags) % state.flow_ring.shape[1]]
+
+
+def flow_phase(state: Swimmers, flow: FlowField) -> Tensor | None:
+    """Where each swimmer's flow is in its period, in [0, 1); None for a flow without one."""
+    return torch.remainder((state.t0 + state.time) / flow.period, 1.0) if flow.period else None
