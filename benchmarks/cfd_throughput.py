@@ -23,7 +23,9 @@ from pathlib import Path
 
 import torch
 
+from flownav.atomic import atomic_write_text
 from flownav.cfd.solver import CylinderLBM, SimConfig
+from flownav.provenance import provenance
 
 
 def _best_time(fn, repeats: int) -> float:
@@ -84,11 +86,8 @@ def main() -> None:
         "loadavg_at_start": load0,
         "cpu": platform.processor() or platform.machine(),
         "torch": torch.__version__,
-        "command": "python benchmarks/cfd_throughput.py",
-        "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-    }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2))
+    } | provenance("python benchmarks/cfd_throughput.py")
+    atomic_write_text(args.out, json.dumps(result, indent=2))
     print(json.dumps(result["headline"], indent=2))
     print(
         f"kernel only {result['kernel_only_mlups']:.1f} MLUPS, copy bandwidth {bw / 1e9:.1f} GB/s, "

@@ -2,30 +2,24 @@
 
 from __future__ import annotations
 
-import datetime as _dt
 import json
 import os
-import platform
-import subprocess
 from pathlib import Path
 
 import torch
+
+from flownav.atomic import atomic_write_text
+from flownav.provenance import provenance
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def machine() -> dict:
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    except OSError:
-        commit = ""
-    return {
-        "date_utc": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M"),
-        "commit": commit,
+    """The benchmark's provenance (flownav.provenance) and what its speed depends on."""
+    return provenance() | {
         "cpu_count": os.cpu_count(),
         "torch_threads": torch.get_num_threads(),
         "torch": torch.__version__,
-        "python": platform.python_version(),
         "load_average_1min": os.getloadavg()[0],
     }
 
@@ -33,7 +27,7 @@ def machine() -> dict:
 def write_result(name: str, payload: dict) -> Path:
     RESULTS.mkdir(parents=True, exist_ok=True)
     path = RESULTS / f"{name}.json"
-    path.write_text(json.dumps(payload, indent=2) + "\n")
+    atomic_write_text(path, json.dumps(payload, indent=2) + "\n")
     print(json.dumps({"headline": payload.get("headline")}, indent=2))
     print(f"wrote {path}")
     return path

@@ -23,8 +23,8 @@ import torch
 from flownav.atomic import atomic_write, atomic_write_text
 from flownav.checkpoint import CheckpointError, load_policy
 from flownav.envs.observations import HISTORY_LEN, HISTORY_STRIDE
-from flownav.evaluation.experiments import file_digest
 from flownav.paths import REPO_ROOT, RESULTS_DIR, resolve
+from flownav.provenance import sha256
 
 FORMATS = {"onnx": ".onnx", "torchscript": ".pt"}
 ARGUMENTS = ("checkpoint", "format", "out")
@@ -181,7 +181,7 @@ def make_card(checkpoint: Path, payload: dict, policy, fmt: str, out: Path) -> d
             "checkpoint": str(
                 checkpoint.relative_to(REPO_ROOT) if checkpoint.is_relative_to(REPO_ROOT) else checkpoint
             ),
-            "checkpoint_sha256": file_digest(checkpoint),
+            "checkpoint_sha256": sha256(checkpoint),
             "role": payload.get("role"),
             "hidden": cfg["hidden"],
             "activation": cfg["activation"],
@@ -193,7 +193,7 @@ def make_card(checkpoint: Path, payload: dict, policy, fmt: str, out: Path) -> d
             "frames": meta.get("frames", "unknown"),
             "final_log_metrics": {k: v for k, v in (meta.get("metrics") or {}).items() if "success" in k} or "unknown",
         },
-        "success": suite_results(file_digest(checkpoint)),
+        "success": suite_results(sha256(checkpoint)),
     }
 
 

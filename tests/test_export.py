@@ -8,9 +8,9 @@ import torch
 
 from flownav.agents.networks import DeterministicPolicy
 from flownav.checkpoint import load_policy, save_policy_checkpoint
-from flownav.evaluation.experiments import file_digest
 from flownav.export import export_policy, main
 from flownav.paths import CHECKPOINT_DIR, RESULTS_DIR
+from flownav.provenance import sha256
 
 STUDENT = CHECKPOINT_DIR / "student.pt"
 
@@ -30,7 +30,7 @@ def check_card(card: dict, fmt: str, policy: DeterministicPolicy):
     assert card["training"]["flow"]["type"] == "grid" and card["training"]["task"]["type"] == "regions"
     # The suite's numbers for this very file, as results/paper.json has them.
     paper = json.loads((RESULTS_DIR / "paper.json").read_text())["experiments"]["training"]
-    assert paper["policies"]["student"]["sha256"] == card["policy"]["checkpoint_sha256"] == file_digest(STUDENT)
+    assert paper["policies"]["student"]["sha256"] == card["policy"]["checkpoint_sha256"] == sha256(STUDENT)
     training = next(s for s in card["success"] if s["experiment"] == "training")
     assert training["success_rate"] == paper["results"]["student"]["success_rate"]
 

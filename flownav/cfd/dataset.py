@@ -7,7 +7,6 @@ lattice spacing), so resampling is exact subsampling. The span Lz is periodic an
 
 from __future__ import annotations
 
-import datetime as dt
 import json
 import math
 import shlex
@@ -25,6 +24,7 @@ from flownav.cfd.validate import REF_3D
 from flownav.errors import ConfigError
 from flownav.flows.base import WAKE_BOUNDS, Cylinder
 from flownav.flows.grid import loop_seam_jump, save_grid_flow
+from flownav.provenance import provenance as run_provenance
 
 NAV_BOX = WAKE_BOUNDS  # the stored grid covers the navigation box exactly
 SHIPPED_DATASET = Path("data/cylinder_re300")  # written only when --out names it
@@ -188,10 +188,8 @@ def write_dataset(cfg: GenerateConfig, state: RunState, out: Path, command: str)
             "source": "3D DNS at Re = 300 (DESIGN.md)",
         },
     }
-    provenance = {
-        "command": command,
+    provenance = run_provenance(command) | {
         "generator": "flownav.cfd (lattice Boltzmann, KBC collision, Bouzidi cylinder)",
-        "date_utc": dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
         "Re": sim.re,
         "lattice": sim.lattice,
         "collision": "KBC (entropic multi-relaxation, Hermite shear part)",
