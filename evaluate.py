@@ -29,11 +29,12 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
 from flownav import schema
-from flownav.builders import build_env, build_flow, build_task
+from flownav.atomic import atomic_write_text
+from flownav.builders import build_flow, build_task
 from flownav.checkpoint import load_policy
 from flownav.errors import ConfigError, reported_as_one_line
-from flownav.evaluation.metrics import summarize
-from flownav.evaluation.rollout import run_episodes
+from flownav.evaluation.protocol import EvalSpec, evaluate
+from flownav.evaluation.tables import log_line
 from flownav.paths import REPO_ROOT, resolve
 from flownav.shipping import is_shipped
 
@@ -42,21 +43,20 @@ def command_line() -> str:
     return "python evaluate.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
 
 
+def eval_spec(cfg: DictConfig) -> EvalSpec:
+    """The protocol's spec of a single evaluation: ``cfg.flow`` / ``cfg.task`` / ``cfg.env``, ``cfg.episodes``,
+    ``cfg.seed``, ``cfg.chunk_size``."""
+    flow = build_flow(cfg.flow, device=cfg.device)
+    task = build_task(cfg.task, flow)
+    return EvalSpec(flow, task, cfg.env, int(cfg.episodes), int(cfg.seed), int(cfg.chunk_size), str(cfg.device))
+
+
 def evaluate_checkpoint(cfg: DictConfig, log=print) -> dict:
     """Evaluate ``cfg.checkpoint`` on ``cfg.flow`` / ``cfg.task`` / ``cfg.env`` for ``cfg.episodes`` episodes."""
     policy, payload = load_policy(resolve(str(cfg.checkpoint)), expect_obs=cfg.get("expect_obs"), device=cfg.device)
     obs = payload["obs"]
-    flow = build_flow(cfg.flow, device=cfg.device)
-    task = build_task(cfg.task, flow)
-
-    def make_env(n, chunk):
-        return build_env(
-            cfg.env, flow, task, [obs], num_envs=n, seed=int(cfg.seed) + 1_000_003 * chunk, device=cfg.device
-        )
-
     t0 = time.time()
-    ep = run_episodes(policy, obs, make_env, int(cfg.episodes), int(cfg.chunk_size), progress=bool(cfg.progress))
-    out = summarize(ep.status, ep.time)
+    out = evaluate(policy, obs, eval_spec(cfg), progress=bool(cfg.progress)).summary
     out.update(
         seconds=round(time.time() - t0, 2),
         checkpoint=str(cfg.checkpoint),
@@ -64,19 +64,10 @@ def evaluate_checkpoint(cfg: DictConfig, log=print) -> dict:
         role=payload["role"],
         command=command_line(),
     )
-    lo, hi = out["success_ci95"]
-    f = out["failures"]
-    t = out["mean_success_time"]
-    log(
-        f"{cfg.checkpoint} ({payload['role']}, {obs}): success {100 * out['success_rate']:.2f}% "
-        f"[{100 * lo:.2f}, {100 * hi:.2f}] of {out['episodes']} episodes, mean success time "
-        f"{'-' if t is None else f'{t:.2f}'}; left domain {f['left_domain']['count']}, hit cylinder "
-        f"{f['hit_obstacle']['count']}, out of time {f['timeout']['count']} ({out['seconds']} s)"
-    )
+    log(f"{cfg.checkpoint} ({payload['role']}, {obs}): {log_line(out)} ({out['seconds']} s)")
     if cfg.get("output"):
-        path = Path(str(cfg.output))  # named explicitly (a shipped place only with the full count: run())
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(out, indent=1))
+        # named explicitly (a shipped place only with the full count: run())
+        atomic_write_text(str(cfg.output), json.dumps(out, indent=1))
     return out
 
 
@@ -114,7 +105,8 @@ def suite_outputs(cfg: DictConfig) -> None:
 def run_paper(cfg: DictConfig, log=print) -> dict:
     """Run the suite, merge it into ``cfg.results`` and rewrite ``cfg.report`` (see :func:`suite_outputs`)."""
     from flownav.evaluation.experiments import run_suite
-    from flownav.evaluation.report import merge_results, provenance, write_report
+    from flownav.evaluation.report import merge_results, write_report
+    from flownav.provenance import provenance
 
     suite_outputs(cfg)
     cmd = command_line()

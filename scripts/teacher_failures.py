@@ -1,10 +1,12 @@
 """Where and why a geo policy fails in the training task: exits per face, timeouts, success by geometry.
 
-    python scripts/teacher_failures.py checkpoints/teacher.pt                  # 4,000 episodes, seed 1000
+    python scripts/teacher_failures.py checkpoints/teacher.pt                  # 4,000 held-out episodes
     python scripts/teacher_failures.py checkpoints/teacher.pt time_limit=100   # any env/default.yaml key
 
 Prints the outcome counts, the domain face each exit went through, where timed-out swimmers end, and
-the success rate binned by the target's y and by (target x - start x). docs/training.md quotes it.
+the success rate binned by the target's y and by (target x - start x). The episodes are the protocol's
+(flownav.evaluation.protocol, seed EVAL_SEED): the ones ``python evaluate.py episodes=4000`` measures.
+docs/training.md quotes it.
 """
 
 from __future__ import annotations
@@ -15,32 +17,35 @@ from collections import Counter
 import torch
 from omegaconf import OmegaConf
 
-from flownav.builders import build_env, build_flow, build_task
+from flownav.builders import build_flow, build_task
 from flownav.checkpoint import load_policy
 from flownav.envs.navigation import Status
 from flownav.envs.observations import GEO_VIEWS
-from flownav.evaluation.rollout import run_episodes
+from flownav.evaluation.protocol import EvalSpec, evaluate
 from flownav.paths import REPO_ROOT
+
+EPISODES = 4000
+
+
+def episodes(checkpoint, overrides: list[str], n: int = EPISODES):
+    """The protocol's ``n`` episodes of a geo checkpoint in the training flow and task, and the flow; ``overrides``
+    are ``key=value`` of env/default.yaml."""
+    policy, payload = load_policy(checkpoint)
+    view = payload["obs"]
+    if view not in GEO_VIEWS:
+        raise SystemExit(f"{checkpoint} reads {view!r}: this script analyses a geo teacher")
+    conf = REPO_ROOT / "conf"
+    env_cfg = OmegaConf.to_container(OmegaConf.load(conf / "env/default.yaml"))
+    for key, value in (a.split("=", 1) for a in overrides):
+        env_cfg[key] = float(value)
+    flow = build_flow(OmegaConf.to_container(OmegaConf.load(conf / "flow/cylinder.yaml")))
+    task = build_task(OmegaConf.to_container(OmegaConf.load(conf / "task/regions.yaml")), flow)
+    return evaluate(policy, view, EvalSpec(flow, task, env_cfg, n)).episodes, flow
 
 
 def main(argv: list[str]) -> None:
     torch.set_num_threads(1)
-    policy, payload = load_policy(argv[0])
-    view = payload["obs"]
-    if view not in GEO_VIEWS:
-        raise SystemExit(f"{argv[0]} reads {view!r}: this script analyses a geo teacher")
-    conf = REPO_ROOT / "conf"
-    env_cfg = OmegaConf.to_container(OmegaConf.load(conf / "env/default.yaml"))
-    for key, value in (a.split("=", 1) for a in argv[1:]):
-        env_cfg[key] = float(value)
-    flow = build_flow(OmegaConf.to_container(OmegaConf.load(conf / "flow/cylinder.yaml")))
-    task = build_task(OmegaConf.to_container(OmegaConf.load(conf / "task/regions.yaml")), flow)
-
-    def make_env(n, chunk):
-        return build_env(env_cfg, flow, task, [view], num_envs=n, seed=1000 + chunk)
-
-    ep = run_episodes(policy, view, make_env, 4000)
-
+    ep, flow = episodes(argv[0], argv[1:])
     status, final = ep.status, ep.final_position
     print(f"success {ep.success.float().mean():.4f}, mean success time {ep.time[ep.success].mean():.2f}")
     print("outcomes:", {Status(k).name: v for k, v in sorted(Counter(status.tolist()).items())})

@@ -374,18 +374,23 @@ def test_single_checkpoint_and_wrong_view_is_refused(tiny_world, tmp_path):
 
 
 def test_example_episode_is_one_the_policies_solve():
-    from flownav.evaluation.experiments import _pick_episode
+    from flownav.evaluation.kinds.figures import pick_episode
 
     s, f = int(Status.SUCCESS), int(Status.TIMEOUT)
     runs = {"teacher": {"status": torch.tensor([f, s, s, f])}, "student": {"status": torch.tensor([s, f, s, s])}}
-    assert _pick_episode(runs, ["teacher", "student"]) == 2
+    assert pick_episode(runs, ["teacher", "student"]) == 2
     runs["teacher"]["status"] = torch.tensor([f, s, f, f])
-    assert _pick_episode(runs, ["teacher", "student"]) == 0  # none both solve: the student's first success
-    assert _pick_episode({"baseline": {"status": torch.tensor([f])}}, ["teacher"]) == 0
+    assert pick_episode(runs, ["teacher", "student"]) == 0  # none both solve: the student's first success
+    assert pick_episode({"baseline": {"status": torch.tensor([f])}}, ["teacher"]) == 0
 
 
 def test_report_puts_the_paper_next_to_ours(tmp_path):
-    from flownav.evaluation.report import merge_results, provenance, write_report
+    from omegaconf import OmegaConf
+
+    from flownav.evaluation.report import merge_results, write_report
+    from flownav.provenance import provenance
+
+    training = OmegaConf.load(ROOT / "conf/evaluate/experiment/paper_training.yaml").suite.training
 
     status = torch.tensor([int(Status.SUCCESS)] * 9 + [int(Status.LEFT_DOMAIN)])
     s = summarize(status, torch.full((10,), 25.0))
@@ -394,6 +399,7 @@ def test_report_puts_the_paper_next_to_ours(tmp_path):
             "title": "a. Training flow",
             "kind": "success",
             "paper": {"student": {"success": 94.44, "time": 25.31}},
+            "targets": OmegaConf.to_container(training.targets),  # the report's targets are the config's
             "results": {"student": s},
             "missing": [
                 "teacher: missing checkpoint checkpoints/teacher.pt: run `python train.py +experiment=teacher`"
@@ -415,10 +421,10 @@ def test_report_puts_the_paper_next_to_ours(tmp_path):
 def test_provenance_is_the_code_before_the_run(tiny_world, monkeypatch, tmp_path):
     """The suite's own outputs (figures, results) are tracked files: the commit is read before they change."""
     import evaluate
-    from flownav.evaluation import report
+    from flownav import provenance
 
     states = iter(["abc123", "abc123+dirty"])
-    monkeypatch.setattr(report, "git_commit", lambda *a: next(states, "abc123+dirty"))
+    monkeypatch.setattr(provenance, "git_commit", lambda *a: next(states, "abc123+dirty"))
     root, data, ck = tiny_world
     own = [f"results={tmp_path / 'paper.json'}", f"report={tmp_path / 'REPORT.md'}"]  # not the shared ones
     cfg = compose_eval("+experiment=paper_training", *tiny_overrides(root, data, ck), *own)

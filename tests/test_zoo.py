@@ -9,7 +9,7 @@ from omegaconf import OmegaConf
 
 from flownav.builders import build_flow, build_task
 from flownav.evaluation.experiments import Suite
-from flownav.evaluation.generalization import family_member
+from flownav.evaluation.kinds.zoo import family_member
 from flownav.flows.zoo import ZOO, BeltramiShell
 from flownav.paths import REPO_ROOT
 

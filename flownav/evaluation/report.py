@@ -5,43 +5,14 @@ from __future__ import annotations
 
 import json
 import os
-import platform
-import subprocess
 import time
 from pathlib import Path
 
+import flownav.evaluation.kinds  # noqa: F401 - loading the kinds registers them
 from flownav.atomic import atomic_write_text
+from flownav.evaluation.registry import KINDS
 from flownav.paths import REPO_ROOT
-
-TARGETS = (
-    "Targets (reported, not asserted): student >= 95% in the training flow; student within 3 points across all "
-    "misalignment angles while the teacher falls; ABC student >= 76%."
-)
-
-
-def git_commit(root: Path = REPO_ROOT) -> str:
-    """HEAD, with ``+dirty`` when tracked files differ from it (other engineers edit the same checkout)."""
-    try:
-        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, check=True)
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
-            cwd=root,
-            capture_output=True,
-            text=True,
-            check=True,
-        )
-        return sha.stdout.strip()[:12] + ("+dirty" if dirty.stdout.strip() else "")
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-
-
-def provenance(command: str) -> dict:
-    return {
-        "command": command,
-        "commit": git_commit(),
-        "date_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime()),
-        "host": f"{platform.machine()} {os.cpu_count()} cores, {platform.python_version()}",
-    }
+from flownav.provenance import git_commit
 
 
 def merge_results(path: Path, new: dict, prov: dict) -> dict:
@@ -68,19 +39,6 @@ def _json_default(o):
 
 
 # ----------------------------------------------------------------------------- markdown
-def pct(x) -> str:
-    return "-" if x is None else f"{100 * x:.2f}%"
-
-
-def ci(s: dict) -> str:
-    lo, hi = s["success_ci95"]
-    return f"[{100 * lo:.2f}, {100 * hi:.2f}]"
-
-
-def num(x, fmt="{:.2f}") -> str:
-    return "-" if x is None else fmt.format(x)
-
-
 def _rel(p, report_dir: Path) -> str:
     try:
         return os.path.relpath(Path(p).resolve(), report_dir.resolve())
@@ -112,46 +70,6 @@ def _header(name: str, r: dict, command: str) -> list[str]:
     return lines
 
 
-def _success_table(r: dict) -> list[str]:
-    res = r.get("results") or {}
-    if not res:
-        return []
-    paper = r.get("paper") or {}
-    lines = [
-        "| policy | success (paper) | success (ours) | Wilson 95% CI | mean success time (paper) | ours | "
-        "left domain | hit cylinder | out of time | episodes |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for pol, s in res.items():
-        p = paper.get(pol) or {}
-        ps = p.get("success")
-        f = s["failures"]
-        lines.append(
-            f"| {pol} | {'-' if ps is None else f'{ps:.2f}%'} | {pct(s['success_rate'])} | {ci(s)} | "
-            f"{num(p.get('time'))} | {num(s['mean_success_time'])} | {pct(f['left_domain']['rate'])} | "
-            f"{pct(f['hit_obstacle']['rate'])} | {pct(f['timeout']['rate'])} | {s['episodes']} |"
-        )
-    return lines + [""]
-
-
-def _sweep_table(r: dict, xs, keyfn, xname: str, extra=None) -> list[str]:
-    res = r.get("results") or {}
-    if not res:
-        return []
-    pols = list(res)
-    head = f"| {xname} | " + " | ".join(f"{p} success | {p} 95% CI" for p in pols) + " |"
-    lines = [head, "|---|" + "---|---|" * len(pols)]
-    for i, x in enumerate(xs):
-        cells = []
-        for p in pols:
-            s = res[p].get(keyfn(x))
-            cells += [pct(s["success_rate"]), ci(s)] if s else ["-", "-"]
-        label = f"{x:g}" if extra is None else f"{x:.3f} ({extra[i]})"
-        lines.append(f"| {label} | " + " | ".join(cells) + " |")
-    first = next(iter(next(iter(res.values())).values()))
-    return lines + ["", f"{first['episodes']} episodes per {xname.split(' ')[0]} and policy.", ""]
-
-
 def _figures(r: dict, report_dir: Path) -> list[str]:
     out = []
     for f in r.get("figures", []) or []:
@@ -161,48 +79,13 @@ def _figures(r: dict, report_dir: Path) -> list[str]:
 
 
 def _verdicts(exps: dict) -> list[str]:
-    lines = ["## Targets", "", TARGETS, ""]
-    tr = exps.get("training", {}).get("results", {})
-    if "student" in tr:
-        s = tr["student"]["success_rate"]
-        lines.append(
-            f"- Student in the training flow: {pct(s)} -> {'met' if s >= 0.95 else 'NOT met'} (target >= 95%)."
-        )
-        if "teacher" in tr and tr["teacher"]["success_rate"] > 0:
-            t = tr["teacher"]["success_rate"]
-            lines.append(
-                f"- Student against its teacher: {pct(s)} vs {pct(t)}, the student keeps {100 * s / t:.0f}% of the "
-                f"teacher's success (paper: 94.44% vs 94.69%, 99.7%)."
-            )
-    mis = exps.get("misalignment", {}).get("results", {})
-    if "student" in mis:
-        rates = [v["success_rate"] for v in mis["student"].values()]
-        spread = 100 * (max(rates) - min(rates))
-        lines.append(
-            f"- Student over misalignment angles: {pct(min(rates))} to {pct(max(rates))}, spread {spread:.2f} points "
-            f"-> {'met' if spread <= 3 else 'NOT met'} (target: within 3 points)."
-        )
-    if "teacher" in mis:
-        rates = list(mis["teacher"].values())
-        lines.append(
-            f"- Teacher over misalignment angles: {pct(rates[0]['success_rate'])} at the first angle, "
-            f"{pct(min(v['success_rate'] for v in rates))} at worst (the paper: falls fast with the angle)."
-        )
-    abc = exps.get("abc", {}).get("results", {})
-    if "student" in abc:
-        s = abc["student"]["success_rate"]
-        lines.append(f"- ABC student: {pct(s)} -> {'met' if s >= 0.76 else 'NOT met'} (target >= 76%, paper 75.9%).")
-    still = exps.get("still_water", {}).get("results", {})
-    if "student" in still:
-        ref = still.get("head_to_target", {}).get("success_rate")
-        s = still["student"]["success_rate"]
-        lines.append(
-            f"- Not a target, a diagnostic for the transfer: in still water the student reaches {pct(s)}"
-            + (f", swimming straight at the target {pct(ref)}." if ref is not None else ".")
-        )
-    if len(lines) == 4:
-        lines.append("- No result to compare yet (checkpoints missing).")
-    return lines + [""]
+    """The Targets section: each experiment's targets (its config's ``targets``), judged by its kind."""
+    lines = []
+    for r in exps.values():
+        if r.get("kind") in KINDS:
+            lines += KINDS[r["kind"]].verdicts(r)
+    head = ["## Targets", "", "Targets and diagnostics of the suite's configs (reported, not asserted):", ""]
+    return head + (lines or ["- No result to compare yet (checkpoints missing)."]) + [""]
 
 
 def _performance(seconds: float | None, exps: dict) -> list[str]:
@@ -244,29 +127,8 @@ def write_report(data: dict, path: Path, command: str, seconds: float | None = N
     lines += _performance(seconds, exps)
     for name, r in exps.items():
         lines += _header(name, r, command)
-        kind = r.get("kind")
-        if kind in ("success", "extended"):
-            lines += _success_table(r)
-        elif kind == "misalignment":
-            lines += _sweep_table(r, r.get("angles", []), lambda a: f"{a:g}", "angle (deg)")
-        elif kind == "time_limit":
-            lines += _sweep_table(r, r.get("limits", []), lambda t: f"{t:g}", "time limit")
-        elif kind == "ratio_sweep":
-            scales = [f"flow x{s:.3g}" for s in r.get("flow_speed_scales", [])]
-            lines += _sweep_table(r, r.get("ratios", []), lambda x: f"{x:.3f}", "U_max / V_max", extra=scales)
-        elif kind == "zoo":
-            from flownav.evaluation.generalization import zoo_markdown
-
-            lines += zoo_markdown(r)
-        elif kind == "loss_curves" and r.get("curve"):
-            c = r["curve"]
-            lines += [
-                f"{c['runs']} runs; loss (eq. 9) at iteration {c['iteration'][0]:g}: {c['mean'][0]:.3f} +- "
-                f"{c['std'][0]:.3f}; at iteration {c['iteration'][min(4, len(c['mean']) - 1)]:g}: "
-                f"{c['mean'][min(4, len(c['mean']) - 1)]:.3f}; final: "
-                f"{c['mean'][-1]:.4f} +- {c['std'][-1]:.4f} (paper: 0.8 -> 0.15 within five iterations, then flat).",
-                "",
-            ]
+        if r.get("kind") in KINDS:
+            lines += KINDS[r["kind"]].markdown(r)
         if r.get("notes"):
             lines += [f"- {n}" for n in r["notes"]] + [""]
         lines += _figures(r, report_dir)

@@ -1,4 +1,4 @@
-"""The generalisation suite (``kind: zoo``): every policy on held-out flows, against head-to-target and the oracle.
+"""``kind: zoo``, the generalisation suite: every policy on held-out flows, against head-to-target and the oracle.
 
 A case is a flow, a task and env overrides (``suite.<name>.cases``). Each policy runs the same episodes
 of each case (the oracle at most ``policies.oracle.max_episodes``). Per policy, the summary row says on how
@@ -22,7 +22,8 @@ from collections.abc import Mapping
 from omegaconf import OmegaConf
 
 from flownav.atomic import atomic_write_text
-from flownav.evaluation.metrics import summarize
+from flownav.evaluation.registry import Missing, register
+from flownav.evaluation.tables import ci, pct
 from flownav.flows.zoo import BeltramiShell
 from flownav.paths import resolve
 
@@ -60,13 +61,17 @@ def family_member(flow_cfg: Mapping, env_cfg: Mapping, families) -> str | None:
     return None
 
 
+def zoo_markdown(r: dict) -> list[str]:
+    """REPORT.md section of a zoo result: the summary row per policy, then one table per case."""
+    return _summary_tables(r) + _case_tables(r) if r.get("results") else []
+
+
+@register("zoo", markdown=zoo_markdown)
 def run_zoo(suite, name: str, spec, out: dict) -> dict:
     """Run every case of the zoo for every policy; write ``spec.json`` if given."""
-    from flownav.evaluation.experiments import Missing
-
     cases, results, flows = {}, {}, {}
     margin = float(spec.get("margin", 0.02))
-    policies = list(suite._each_policy(spec, out))
+    policies = list(suite.each_policy(spec, out))
     for case, cs in spec.cases.items():
         t0 = time.time()
         try:
@@ -75,30 +80,29 @@ def run_zoo(suite, name: str, spec, out: dict) -> dict:
             out["missing"].append(f"case {case}: {e}")
             continue
         env_cfg = OmegaConf.merge(suite.env_cfg(spec), cs.get("env") or {})
-        swim = float(env_cfg.u_max) * float(env_cfg.get("swim_speed_scale", 1.0))
-        mean = getattr(flow, "mean_speed", None)
-        flows[case] = {
-            "flow": OmegaConf.to_container(cs.flow, resolve=True),
-            "note": str(cs.get("note", "")),
-            "in_family": cs.get("in_family"),
-            "max_speed": float(flow.max_speed),
-            "mean_speed": None if mean is None else float(mean),
-            "swim_over_max_flow": swim / flow.max_speed if flow.max_speed else None,
+        flows[case] = _case_info(cs, flow, env_cfg)
+        results[case] = {
+            pol: suite.measure(f"{name}/{case}", pol, flow, cs.task, env_cfg, spec.episodes).summary for pol in policies
         }
-        results[case] = {}
-        for pol in policies:
-            t1 = time.time()
-            ep = suite.rollout(pol, flow, cs.task, env_cfg, spec.episodes)
-            results[case][pol] = summarize(ep.status, ep.time) | {"seconds": round(time.time() - t1, 2)}
-            suite.log(f"[{name}/{case}] {pol}: {_short(results[case][pol])}")
         cases[case] = round(time.time() - t0, 2)
     summary = summarise_policies(results, flows, margin)
     res = {"cases": flows, "results": results, "summary": summary, "margin": margin, "case_seconds": cases}
     if spec.get("json"):
-        path = resolve(str(spec.json))
-        path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(path, json.dumps(res | {"title": out["title"]}, indent=1))
+        atomic_write_text(resolve(str(spec.json)), json.dumps(res | {"title": out["title"]}, indent=1))
     return res
+
+
+def _case_info(cs, flow, env_cfg) -> dict:
+    swim = float(env_cfg.u_max) * float(env_cfg.get("swim_speed_scale", 1.0))
+    mean = getattr(flow, "mean_speed", None)
+    return {
+        "flow": OmegaConf.to_container(cs.flow, resolve=True),
+        "note": str(cs.get("note", "")),
+        "in_family": cs.get("in_family"),
+        "max_speed": float(flow.max_speed),
+        "mean_speed": None if mean is None else float(mean),
+        "swim_over_max_flow": swim / flow.max_speed if flow.max_speed else None,
+    }
 
 
 def summarise_policies(results: dict, flows: dict, margin: float) -> dict:
@@ -137,21 +141,8 @@ def _row(pol: str, cases: list, results: dict, margin: float) -> dict:
     }
 
 
-def _short(s: dict) -> str:
-    f = s["failures"]
-    return (
-        f"{100 * s['success_rate']:.2f}% of {s['episodes']} (left {f['left_domain']['count']}, "
-        f"hit {f['hit_obstacle']['count']}, timeout {f['timeout']['count']})"
-    )
-
-
-def zoo_markdown(r: dict) -> list[str]:
-    """REPORT.md section of a zoo result: the summary row per policy, then one table per case."""
-    from flownav.evaluation.report import ci, pct
-
-    summary, results, cases = r.get("summary") or {}, r.get("results") or {}, r.get("cases") or {}
-    if not results:
-        return []
+def _summary_tables(r: dict) -> list[str]:
+    summary = r.get("summary") or {}
     margin = 100 * float(r.get("margin", 0.02))
     lines = [
         f"Beats head-to-target = success >= head-to-target's - {margin:g} points; fraction of the oracle = success / "
@@ -173,6 +164,11 @@ def zoo_markdown(r: dict) -> list[str]:
                 f"{'-' if mf is None else f'{100 * mf:.0f}%'} | {'-' if wf is None else f'{100 * wf:.0f}%'} |"
             )
         lines.append("")
+    return lines
+
+
+def _case_tables(r: dict) -> list[str]:
+    results, cases, lines = r.get("results") or {}, r.get("cases") or {}, []
     for case, res in results.items():
         c = cases.get(case, {})
         mean = c.get("mean_speed")
