@@ -35,7 +35,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from common import machine, write_result  # noqa: E402
 
-from flownav.algorithms.report import compose_config  # noqa: E402
+from flownav.builders import compose_config  # noqa: E402
 from flownav.envs import core  # noqa: E402
 
 

@@ -27,9 +27,9 @@ from flownav.flows.families import (
 )
 from flownav.flows.grid import load_grid_flow
 from flownav.flows.transforms import RotatedFlow, ScaledFlow
-from flownav.paths import DEFAULT_FLOW_DATASET, resolve
+from flownav.paths import DEFAULT_FLOW_DATASET, REPO_ROOT, resolve
 
-__all__ = ["ConfigError", "build_env", "build_flow", "build_task"]
+__all__ = ["ConfigError", "build_env", "build_flow", "build_task", "compose_config"]
 
 
 def _box(value) -> Box:
@@ -206,3 +206,11 @@ def build_env(
         )
     except ValueError as e:  # a range that ties env keys together (NavigationEnv, RewardConfig check it)
         raise ConfigError(f"env: {e}") from e
+
+
+def compose_config(overrides=()):
+    """train.py's config (``conf/config.yaml``) with Hydra ``overrides``, composed outside a Hydra app."""
+    from hydra import compose, initialize_config_dir  # Hydra only for callers that compose
+
+    with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
+        return compose("config", overrides=list(overrides))

@@ -14,8 +14,13 @@ gymnasium = pytest.importorskip("gymnasium")
 sb3 = pytest.importorskip("stable_baselines3")
 
 import flownav  # noqa: E402,F401 - registers the ids
-from flownav.algorithms.report import compose_config  # noqa: E402
-from flownav.builders import ConfigError, build_env, build_flow, build_task  # noqa: E402
+from flownav.builders import (  # noqa: E402
+    ConfigError,
+    build_env,
+    build_flow,
+    build_task,
+    compose_config,
+)
 from flownav.checkpoint import load_policy  # noqa: E402
 from flownav.envs.navigation import DPSI_MAX, DTHETA_MAX, Status  # noqa: E402
 from flownav.gym import ENV_IDS  # noqa: E402

@@ -1,0 +1,129 @@
+"""Held-out success of trained checkpoints, and shipping the best seed.
+
+    # success on 10,000 held-out episodes of each run's training task, one entry per checkpoint
+    python -m flownav.evaluation.selection --name teacher --out results/teacher.json \\
+        multirun/teacher/<date>/seed*/checkpoints/last.pt
+    # the same, and ship the best of them (by this held-out success) to checkpoints/, atomically: only
+    # finished runs of the experiment's full budget, scored on the full --episodes (flownav/shipping.py)
+    python -m flownav.evaluation.selection --name teacher --out results/teacher.json \\
+        --ship checkpoints/teacher.pt multirun/teacher/<date>/seed*/checkpoints/last.pt
+
+Each checkpoint is evaluated by :func:`flownav.evaluation.protocol.evaluate` on the flow, task and env
+groups of its own training run (``--override`` changes them), on the held-out seed ``EVAL_SEED``: the
+same episodes ``evaluate.py`` and the suite measure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import math
+import shlex
+import sys
+
+import torch
+
+from flownav.atomic import atomic_write_text
+from flownav.evaluation.protocol import EVAL_SEED, EvalSpec, evaluate
+
+EPISODES = 10_000  # held-out episodes per checkpoint; shipping needs at least these
+PROG = "python -m flownav.evaluation.selection"
+
+
+def training_spec(payload: dict, episodes: int, overrides=(), chunk_size: int = 10_000, seed: int = EVAL_SEED):
+    """The :class:`EvalSpec` of a checkpoint's training flow, task and env (``overrides``: Hydra overrides of
+    train.py's config, which win over the run's own groups)."""
+    from omegaconf import OmegaConf, open_dict
+
+    from flownav.builders import build_flow, build_task, compose_config
+
+    train_cfg = payload.get("meta", {}).get("config", {})
+    cfg = compose_config(list(overrides))
+    with open_dict(cfg):
+        for group in ("flow", "task", "env"):
+            if group in train_cfg and not any(o.startswith((f"{group}=", f"{group}.")) for o in overrides):
+                cfg[group] = OmegaConf.create(train_cfg[group])
+    flow = build_flow(cfg.flow)
+    return EvalSpec(flow, build_task(cfg.task, flow), cfg.env, episodes, seed=seed, chunk_size=chunk_size)
+
+
+def evaluate_checkpoint(path, episodes: int = EPISODES, overrides=(), chunk_size: int = 10_000) -> dict:
+    """The protocol's summary of one checkpoint on its training task, with where it came from."""
+    from flownav.checkpoint import load_policy
+
+    policy, payload = load_policy(path)
+    obs = payload["obs"]
+    summary = evaluate(policy, obs, training_spec(payload, episodes, overrides, chunk_size)).summary
+    meta = payload.get("meta", {})
+    return summary | {"checkpoint": str(path), "obs": obs, "role": payload["role"], "frames": meta.get("frames")}
+
+
+def _mean_std(xs):
+    xs = [x for x in xs if x is not None and not math.isnan(x)]
+    if not xs:
+        return None, None
+    m = sum(xs) / len(xs)
+    return m, (sum((x - m) ** 2 for x in xs) / len(xs)) ** 0.5
+
+
+def select(args) -> dict:
+    """Evaluate ``args.checkpoints``, write ``args.out``, and with ``args.ship`` copy the best one there."""
+    from flownav.checkpoint import load_checkpoint, ship_checkpoint
+    from flownav.errors import ConfigError
+    from flownav.shipping import is_shipped, require_shippable
+
+    if args.ship or is_shipped(args.out):  # refused before the (long) evaluation
+        if args.episodes < EPISODES:
+            raise ConfigError(
+                f"--episodes {args.episodes} is below the {EPISODES} a shipped result needs; drop --ship "
+                "(and write --out outside results/) for a try"
+            )
+        for p in args.checkpoints:
+            require_shippable(load_checkpoint(p), p)
+    torch.set_num_threads(args.threads)
+    runs = [evaluate_checkpoint(p, args.episodes, args.override, args.chunk) for p in args.checkpoints]
+    m, s = _mean_std([r["success_rate"] for r in runs])
+    mt, _ = _mean_std([r["mean_success_time"] for r in runs])
+    out = {
+        "name": args.name,
+        "command": f"{PROG} " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
+        "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "episodes_per_checkpoint": args.episodes,
+        "eval_seed": EVAL_SEED,
+        "success_rate_mean": m,
+        "success_rate_std": s,
+        "mean_success_time_mean": mt,
+        "runs": runs,
+    }
+    if args.ship:  # the rule for every shipped policy: the best seed by held-out success
+        best = max(runs, key=lambda r: r["success_rate"])
+        ship_checkpoint(best["checkpoint"], args.ship)
+        out["shipped"] = {"checkpoint": best["checkpoint"], "to": args.ship, "success_rate": best["success_rate"]}
+        print(f"shipped {best['checkpoint']} ({best['success_rate']:.4f}) -> {args.ship}")
+    atomic_write_text(args.out, json.dumps(out, indent=2))
+    print(json.dumps({k: v for k, v in out.items() if k != "runs"}, indent=2))
+    for r in runs:
+        print(f"{r['checkpoint']}: success {r['success_rate']:.4f}, mean success time {r['mean_success_time']}")
+    return out
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n")[0])
+    p.add_argument("checkpoints", nargs="+")
+    p.add_argument("--name", required=True)
+    p.add_argument("--out", required=True)
+    p.add_argument("--episodes", type=int, default=EPISODES)
+    p.add_argument("--chunk", type=int, default=10_000, help="episodes stepped together")
+    p.add_argument("--override", action="append", default=[], help="Hydra override, e.g. flow=vortex_street")
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--ship", default=None, help="copy the best checkpoint (held-out success) here, atomically")
+    args = p.parse_args(argv)
+    from flownav.errors import reported_as_one_line
+
+    with reported_as_one_line():  # a bad argument: one line, exit status 2
+        select(args)
+
+
+if __name__ == "__main__":
+    main()
