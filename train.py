@@ -31,6 +31,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from flownav import schema
 from flownav.algorithms import ALGORITHMS
+from flownav.atomic import atomic_write_text
 from flownav.checkpoint import find_resume, load_resume_checkpoint
 from flownav.errors import reported_as_one_line
 from flownav.resume import resolve_resume
@@ -79,7 +80,7 @@ def run(cfg: DictConfig, run_dir: str | Path) -> dict:
     clean = {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in metrics.items()}
     if targets:
         clean["shipped"] = ship_run(run_dir, targets)
-    (run_dir / "final_metrics.json").write_text(json.dumps(clean, indent=2, default=str))
+    atomic_write_text(run_dir / "final_metrics.json", json.dumps(clean, indent=2, default=str))
     return clean
 
 

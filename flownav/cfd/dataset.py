@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from flownav.atomic import atomic_write_text
 from flownav.cfd import diagnostics
 from flownav.cfd.runner import CHECKPOINT_EVERY_S, RunState, run
 from flownav.cfd.solver import CylinderLBM, SimConfig
@@ -113,7 +114,7 @@ def simulate(
     cfg.check()
     sim = CylinderLBM(cfg.sim, device=device)
     run_dir.mkdir(parents=True, exist_ok=True)
-    (run_dir / "config.json").write_text(json.dumps({"sim": cfg.sim.to_dict(), **_gen_dict(cfg)}, indent=2))
+    atomic_write_text(run_dir / "config.json", json.dumps({"sim": cfg.sim.to_dict(), **_gen_dict(cfg)}, indent=2))
     state = run(
         sim,
         cfg.warmup + cfg.record,
