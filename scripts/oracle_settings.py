@@ -3,7 +3,8 @@
     python scripts/oracle_settings.py                       # 64 episodes per setting, one chunk
     python scripts/oracle_settings.py 128 periodic          # only the periodic test
 
-Prints, per setting: success, left domain, timeout, mean success time and seconds (wall, one torch thread).
+Prints, per setting: success, left domain, timeout, mean success time and seconds (wall, one torch thread), on
+the protocol's episodes (flownav.evaluation.protocol, seed EVAL_SEED) of env/default.yaml with the ABC swimmer.
 docs/oracle.md quotes it.
 """
 
@@ -16,14 +17,13 @@ import torch
 from omegaconf import OmegaConf
 
 from flownav.builders import build_task
-from flownav.envs import NavigationEnv
-from flownav.evaluation.metrics import summarize
 from flownav.evaluation.oracle import Oracle
-from flownav.evaluation.rollout import run_episodes
+from flownav.evaluation.protocol import EvalSpec, evaluate
 from flownav.flows.analytic import ABCFlow
 from flownav.flows.base import make_periodic
 from flownav.paths import REPO_ROOT
 
+ABC_ENV = {"swim_speed_scale": 0.1}  # the ABC test's swimmer (conf/evaluate/experiment/paper_abc.yaml)
 SETTINGS = ({}, {"horizon": 100, "candidates": 48, "iterations": 2}, {"horizon": 30})
 
 
@@ -35,15 +35,11 @@ def main(argv: list[str]) -> None:
         flow = make_periodic(ABCFlow(), ["y", "z"]) if test == "periodic" else ABCFlow()
         task = build_task(OmegaConf.load(REPO_ROOT / "conf" / "task" / "abc.yaml"), flow)
         limit = 100.0 if test == "periodic" else 60.0
-
-        def make_env(n, chunk, flow=flow, task=task, limit=limit):
-            kw = {"time_limit": limit, "swim_speed_scale": 0.1, "seed": chunk}
-            return NavigationEnv(flow, task, num_envs=n, views=("geo",), **kw)
-
+        env = OmegaConf.merge(OmegaConf.load(REPO_ROOT / "conf/env/default.yaml"), ABC_ENV, {"time_limit": limit})
+        spec = EvalSpec(flow, task, env, episodes, chunk_size=episodes)
         for kw in SETTINGS:
             t0 = time.time()
-            ep = run_episodes(Oracle(**kw), "geo", make_env, episodes, episodes)
-            s = summarize(ep.status, ep.time)
+            s = evaluate(Oracle(**kw), "geo", spec).summary
             f = s["failures"]
             print(
                 f"{test} {kw or 'defaults'}: success {100 * s['success_rate']:.1f}% of {episodes}, left "

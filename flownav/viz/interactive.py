@@ -180,27 +180,19 @@ def main(argv=None) -> str:
     p.add_argument("--episodes", type=int, default=1, help="episodes per policy (same starts and targets)")
     p.add_argument("--seed", type=int, default=0, help="evaluation seed (starts, targets, flow phase)")
     a, overrides = p.parse_known_args(argv)
-    from hydra import compose, initialize_config_dir
-
-    from flownav.builders import build_env, build_flow, build_task
+    from flownav.builders import build_flow, build_task, compose_config
     from flownav.checkpoint import load_policy
-    from flownav.evaluation.rollout import run_episodes
-    from flownav.paths import REPO_ROOT, resolve
+    from flownav.evaluation.protocol import EvalSpec, evaluate
+    from flownav.paths import resolve
 
     torch.set_num_threads(1)
-    with initialize_config_dir(str(REPO_ROOT / "conf"), version_base=None):
-        cfg = compose("config", overrides=overrides)
+    cfg = compose_config(overrides)
     flow = build_flow(cfg.flow)
-    task = build_task(cfg.task, flow)
+    spec = EvalSpec(flow, build_task(cfg.task, flow), cfg.env, a.episodes, seed=a.seed)
     runs = {}
     for path in a.checkpoint:
         policy, payload = load_policy(resolve(path))
-        obs = payload["obs"]
-
-        def make_env(n, chunk, obs=obs):
-            return build_env(cfg.env, flow, task, [obs], num_envs=n, seed=a.seed + 1_000_003 * chunk)
-
-        runs[Path(path).stem] = run_episodes(policy, obs, make_env, a.episodes, record=a.episodes).trajectories
+        runs[Path(path).stem] = evaluate(policy, payload["obs"], spec, record=a.episodes).episodes.trajectories
     flow_name = cfg.flow.get("path") or cfg.flow.get("type")
     out = trajectories_html(runs, flow, a.out, title=f"{', '.join(runs)} in {flow_name} (seed {a.seed})")
     print(out)
