@@ -1,7 +1,7 @@
 """Shipped files (checkpoints/, results/, REPORT.md, data/) change only by an explicit, named action.
 
 Every run writes into its own run directory. ``ship=true`` (train.py, evaluate.py), an explicit
-``report=`` / ``results=`` path (evaluate.py) or ``python -m flownav.algorithms.report eval --ship`` (the
+``report=`` / ``results=`` path (evaluate.py) or ``python -m flownav.evaluation.selection --ship`` (the
 best of several seeds) copies a result to a shipped place, and only a result of the full budget: a run
 whose training budget is below its experiment's, or an evaluation with fewer episodes, is refused.
 """
@@ -91,7 +91,7 @@ def train_targets(cfg, multirun: bool) -> dict:
     if multirun:
         raise ConfigError(
             "ship=true in a -m sweep: the seeds would race for one file; drop ship=true and ship the best seed "
-            "with python -m flownav.algorithms.report eval --ship <path> <run>/checkpoints/last.pt ..."
+            "with python -m flownav.evaluation.selection --ship <path> <run>/checkpoints/last.pt ..."
         )
     require_full_budget(cfg)
     return targets

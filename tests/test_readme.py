@@ -50,3 +50,14 @@ def test_gymnasium_snippet_runs(monkeypatch):
     namespace = run_block("flownav/CylinderWake-v0", REPO_ROOT, monkeypatch)
     assert namespace["model"].num_timesteps == 2048
     assert namespace["vec"].observation_space.shape == (256, 9)
+
+
+def test_the_module_map_lists_every_module():
+    """The README's "Where things live" names every module of flownav/ and every script."""
+    text = readme_text()
+    start = text.index("## Where things live")
+    block = text[start : text.index("```", text.index("```", start) + 3)]
+    files = [p for p in (REPO_ROOT / "flownav").rglob("*.py") if p.name not in ("__init__.py", "__main__.py")]
+    files += list((REPO_ROOT / "scripts").glob("*.py"))
+    missing = sorted(str(p.relative_to(REPO_ROOT)) for p in files if p.name not in block)
+    assert not missing, f"the README's module map does not name {missing}"
