@@ -24,7 +24,6 @@ import re
 from pathlib import Path
 
 import torch
-from tensordict.nn import TensorDictModule
 
 from flownav.agents.networks import DeterministicPolicy
 from flownav.atomic import atomic_write
@@ -224,8 +223,3 @@ def load_policy(path, expect_obs: str | None = None, device="cpu") -> tuple[Dete
     policy.load_state_dict(payload["policy"]["state_dict"])
     policy.eval().requires_grad_(False)
     return policy.to(device), payload
-
-
-def policy_module(policy: DeterministicPolicy, obs: str, out_key: str = "action") -> TensorDictModule:
-    """Wrap a deterministic policy to read ``obs`` and write ``out_key`` in a tensordict."""
-    return TensorDictModule(policy, in_keys=[obs], out_keys=[out_key])

@@ -103,3 +103,18 @@ def test_the_reference_tells_episodes_apart(teacher, reference):
     policy, _ = load_policy(teacher)
     other = evaluate(policy, "geo", EvalSpec(flow, build_task(cfg.task, flow), cfg.env, EPISODES, seed=1))
     assert other.summary != reference.summary
+
+
+def test_the_selection_command_writes_the_protocol_summary_and_refuses_a_short_ship(teacher, reference, tmp_path):
+    import json
+
+    from flownav.evaluation.selection import main
+
+    out = tmp_path / "teacher.json"
+    args = [str(teacher), "--name", "t", "--out", str(out), "--episodes", str(EPISODES), "--threads", "1"]
+    main([*args, "--override", f"env.time_limit={LIMIT}"])
+    data = json.loads(out.read_text())
+    assert core(data["runs"][0]) == reference.summary and data["eval_seed"] == EVAL_SEED and data["commit"]
+    with pytest.raises(SystemExit) as stop:  # a shipped checkpoint needs the full 10,000 episodes
+        main([*args, "--ship", str(tmp_path / "shipped.pt")])
+    assert stop.value.code == 2 and not (tmp_path / "shipped.pt").exists()

@@ -27,7 +27,7 @@ def test_bring_your_own_flow_snippet_runs_and_succeeds_as_stated(monkeypatch):
     blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
     assert blocks, "the README lost its 'Bring your own flow' example"
     stated = re.search(r"success\s+[\d.]+%, Wilson 95% interval \[([\d.]+), ([\d.]+)\]", text)
-    assert stated, "the README no longer states the example's success interval"
+    assert stated, "the README does not state the example's success interval"
     lo, hi = (float(v) / 100 for v in stated.groups())
     monkeypatch.chdir(REPO_ROOT)
     namespace: dict = {}
@@ -35,7 +35,7 @@ def test_bring_your_own_flow_snippet_runs_and_succeeds_as_stated(monkeypatch):
     episodes = namespace["episodes"]
     assert len(episodes) == 1000
     rate = summarize(episodes.status, episodes.time)["success_rate"]
-    assert lo <= rate <= hi, f"the README example now succeeds in {rate:.1%}, outside its stated [{lo:.1%}, {hi:.1%}]"
+    assert lo <= rate <= hi, f"the README example succeeds in {rate:.1%}, outside its stated [{lo:.1%}, {hi:.1%}]"
 
 
 def test_netcdf_snippet_runs_and_the_student_reaches_the_target(monkeypatch, tmp_path):

@@ -9,7 +9,6 @@
 
 from __future__ import annotations
 
-import datetime as dt
 import json
 import os
 import sys
@@ -23,6 +22,7 @@ from flownav.cfd.diagnostics import force_stats
 from flownav.cfd.runner import run
 from flownav.cfd.solver import CylinderLBM, SimConfig
 from flownav.flows.grid import load_grid_flow
+from flownav.provenance import provenance
 
 REF_2D = {"St": 0.165, "St_tol": 0.05, "Cd": 1.33, "Cd_tol": 0.10}
 REF_3D = {"St": 0.203, "St_tol": 0.07, "Cd": 1.27, "Cd_tol": 0.12, "rms_w_min": 0.02}
@@ -133,9 +133,7 @@ def validate_3d(dataset: Path) -> dict:
 
 
 def validate(dataset: Path, out: Path, run_dir: Path, cells_per_d=None, device="cpu") -> dict:
-    result = {
-        "command": "python -m flownav.cfd " + " ".join(sys.argv[1:]),
-        "date_utc": dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+    result = provenance("python -m flownav.cfd " + " ".join(sys.argv[1:])) | {
         "torch_threads": torch.get_num_threads(),
         "case_2d_re100": validate_2d(run_dir, cells_per_d, device),
     }

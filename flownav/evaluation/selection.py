@@ -16,7 +16,6 @@ same episodes ``evaluate.py`` and the suite measure.
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import json
 import math
 import shlex
@@ -26,6 +25,7 @@ import torch
 
 from flownav.atomic import atomic_write_text
 from flownav.evaluation.protocol import EVAL_SEED, EvalSpec, evaluate
+from flownav.provenance import provenance
 
 EPISODES = 10_000  # held-out episodes per checkpoint; shipping needs at least these
 PROG = "python -m flownav.evaluation.selection"
@@ -85,10 +85,8 @@ def select(args) -> dict:
     runs = [evaluate_checkpoint(p, args.episodes, args.override, args.chunk) for p in args.checkpoints]
     m, s = _mean_std([r["success_rate"] for r in runs])
     mt, _ = _mean_std([r["mean_success_time"] for r in runs])
-    out = {
-        "name": args.name,
-        "command": f"{PROG} " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
-        "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+    out = {"name": args.name} | provenance(f"{PROG} " + " ".join(shlex.quote(a) for a in sys.argv[1:]))
+    out |= {
         "episodes_per_checkpoint": args.episodes,
         "eval_seed": EVAL_SEED,
         "success_rate_mean": m,
