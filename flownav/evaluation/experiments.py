@@ -20,8 +20,9 @@ from omegaconf import DictConfig, OmegaConf
 
 from flownav.builders import build_flow, build_task
 from flownav.checkpoint import CheckpointError, load_policy
+from flownav.evaluation.kinds import kind
 from flownav.evaluation.protocol import EVAL_SEED, EvalSpec, Evaluation, evaluate
-from flownav.evaluation.registry import Missing, kind
+from flownav.evaluation.registry import Missing
 from flownav.evaluation.scripted import SCRIPTED
 from flownav.evaluation.tables import log_line
 from flownav.flows.grid import GridFlowError

@@ -48,12 +48,3 @@ def register(name: str, **parts) -> Callable:
         return run
 
     return add
-
-
-def kind(name: str) -> Kind:
-    """The registered kind ``name`` (every module of flownav/evaluation/kinds/ is loaded first)."""
-    import flownav.evaluation.kinds  # noqa: F401 - loading the kinds registers them
-
-    if name not in KINDS:
-        raise ValueError(f"kind {name!r} is not an experiment kind; choose one of {sorted(KINDS)}")
-    return KINDS[name]

@@ -8,9 +8,8 @@ import os
 import time
 from pathlib import Path
 
-import flownav.evaluation.kinds  # noqa: F401 - loading the kinds registers them
 from flownav.atomic import atomic_write_text
-from flownav.evaluation.registry import KINDS
+from flownav.evaluation.kinds import KINDS
 from flownav.paths import REPO_ROOT
 from flownav.provenance import git_commit
 

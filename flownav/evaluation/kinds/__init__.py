@@ -11,3 +11,14 @@ from flownav.evaluation.kinds import (  # noqa: F401 - imported for their regist
     time_limit,
     zoo,
 )
+from flownav.evaluation.registry import KINDS, Kind
+
+
+def kind(name: str) -> Kind:
+    """The registered kind ``name``."""
+    if name not in KINDS:
+        raise ValueError(f"kind {name!r} is not an experiment kind; choose one of {sorted(KINDS)}")
+    return KINDS[name]
+
+
+__all__ = ["KINDS", "kind"]
