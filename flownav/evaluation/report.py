@@ -84,7 +84,8 @@ def _verdicts(exps: dict) -> list[str]:
         if r.get("kind") in KINDS:
             lines += KINDS[r["kind"]].verdicts(r)
     head = ["## Targets", "", "Targets and diagnostics of the suite's configs (reported, not asserted):", ""]
-    return head + (lines or ["- No result to compare yet (checkpoints missing)."]) + [""]
+    nothing = "- Nothing to judge yet: no result of an entry with `targets:` (or its checkpoints are missing)."
+    return head + (lines or [nothing]) + [""]
 
 
 def _performance(seconds: float | None, exps: dict) -> list[str]:
