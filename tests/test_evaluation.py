@@ -270,6 +270,23 @@ def test_paper_composes_every_experiment():
     assert cfg.suite.abc.env.swim_speed_scale == 0.1
 
 
+def test_every_suite_entry_names_a_registered_kind_and_every_kind_is_used():
+    """The kinds are the registry's (one module each in flownav/evaluation/kinds/); the configs use each of them."""
+    from flownav.evaluation.kinds import KINDS, kind
+
+    used = set()
+    for path in sorted((ROOT / "conf" / "evaluate" / "experiment").glob("*.yaml")):
+        cfg = compose_eval(f"+experiment={path.stem}")
+        for name, spec in cfg.suite.items():
+            assert kind(str(spec.kind)).name == spec.kind, f"{path.name}: suite.{name}"
+            used.add(str(spec.kind))
+    assert used == set(KINDS)
+    modules = {p.stem for p in (ROOT / "flownav" / "evaluation" / "kinds").glob("*.py")} - {"__init__"}
+    assert modules == set(KINDS)
+    with pytest.raises(ValueError, match="choose one of"):
+        kind("wander")
+
+
 def test_time_limit_rows_equal_runs_at_that_limit(tiny_world):
     """One run at the longest limit, cut at a shorter one, gives exactly what a run at that limit gives."""
     import evaluate
