@@ -56,7 +56,7 @@ def plain_collect(env, policy, steps: int, seed: int = 0, record: list | None = 
     t_start = time.perf_counter()
     with torch.no_grad():
         for _ in range(steps):
-            out = policy.net(policy.normalizer(obs))
+            out = policy.outputs(obs)
             loc, scale = out[:, :3], torch.nn.functional.softplus(out[:, 3:] + 0.0) + 1e-3
             u = torch.tanh(loc + scale * torch.randn_like(loc))
             action = low + (high - low) * (u + 1) / 2

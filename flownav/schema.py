@@ -281,6 +281,7 @@ LOGGER = {
     },
 }
 
+PRIOR = Str(choices=("head_to_target",), null=True)  # the policy's output corrects head-to-target's action
 NETWORK = {"hidden": Key(INTS, ge=1), "activation": Str(choices=("tanh", "relu", "elu", "silu"))}
 
 PPO = {
@@ -300,7 +301,7 @@ PPO = {
     "update_normalizer": Bool(),
     "normalize_advantage": Bool(),
     "max_grad_norm": Float(gt=0),
-    "actor": NETWORK | {"init_scale": Float(gt=0), "scale_lb": Float(gt=0), "output_gain": Float(gt=0)},
+    "actor": NETWORK | {"init_scale": Float(gt=0), "scale_lb": Float(gt=0), "output_gain": Float(gt=0), "prior": PRIOR},
     "critic": NETWORK,
     "init_from": Str(null=True),
     "log_every": Int(ge=1),
@@ -323,6 +324,7 @@ DAGGER = {
     "grad_clip": Float(ge=0),
     "hidden": Key(INTS, ge=1),
     "activation": NETWORK["activation"],
+    "prior": PRIOR,
     "final_eval_episodes": Int(ge=0),
     "results_json": Str(null=True),
 }

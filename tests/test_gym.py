@@ -113,7 +113,7 @@ def test_action_map_exact_bounds():
 def test_action_map_is_the_deterministic_policy_without_tanh():
     policy, _ = load_policy(CHECKPOINT_DIR / "student.pt")
     obs = torch.randn(64, policy.config["obs_dim"]) * 3
-    a = torch.tanh(policy.net(policy.normalizer(obs))[:, :3])
+    a = torch.tanh(policy.outputs(obs)[:, :3])
     torch.testing.assert_close(paper_action(a.numpy()), policy(obs), atol=1e-6, rtol=0)
 
 

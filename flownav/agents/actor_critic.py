@@ -26,7 +26,7 @@ class ActorNet(nn.Module):
         self.extract = NormalParamExtractor(scale_mapping=f"biased_softplus_{init_scale}", scale_lb=scale_lb)
 
     def forward(self, obs):
-        return self.extract(self.policy.net(self.policy.normalizer(obs)))
+        return self.extract(self.policy.outputs(obs))
 
 
 class CriticNet(nn.Module):
@@ -62,6 +62,7 @@ def make_actor_critic(obs_key: str, critic_key: str, low, high, actor_cfg, criti
         hidden=list(actor_cfg["hidden"]),
         activation=str(actor_cfg["activation"]),
         n_outputs=2 * len(low),
+        prior=obs_key if actor_cfg.get("prior") else None,
     )
     init_output_layer(policy.net, float(actor_cfg.get("output_gain", 0.01)))
     net = ActorNet(policy, float(actor_cfg["init_scale"]), float(actor_cfg["scale_lb"]))

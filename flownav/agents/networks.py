@@ -14,6 +14,8 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor, nn
 
+from flownav.agents.prior import HeadToTargetPrior
+
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU, "silu": nn.SiLU}
 
 
@@ -72,7 +74,10 @@ class SquashedAction(nn.Module):
 
 
 class DeterministicPolicy(nn.Module):
-    """observation -> normalise -> MLP -> first ``action_dim`` outputs -> tanh into the action box."""
+    """observation -> normalise -> MLP -> first ``action_dim`` outputs -> tanh into the action box.
+
+    With ``prior`` (a view name, for :class:`~flownav.agents.prior.HeadToTargetPrior`) the MLP's first
+    ``action_dim`` outputs are a correction added to head-to-target's action before the squash."""
 
     def __init__(
         self,
@@ -82,6 +87,7 @@ class DeterministicPolicy(nn.Module):
         hidden: Sequence[int] = (256, 256),
         activation: str = "tanh",
         n_outputs: int | None = None,
+        prior: str | None = None,
     ):
         super().__init__()
         self.action_dim = len(action_low)
@@ -93,12 +99,23 @@ class DeterministicPolicy(nn.Module):
             "activation": activation,
             "n_outputs": int(n_outputs or self.action_dim),
         }
+        if prior is not None:
+            self.config["prior"] = prior
         self.normalizer = ObsNormalizer(obs_dim)
         self.net = mlp(obs_dim, self.config["n_outputs"], hidden, activation)
         self.squash = SquashedAction(action_low, action_high)
+        self.prior = None if prior is None else HeadToTargetPrior(prior, action_low, action_high)
+
+    def outputs(self, obs: Tensor) -> Tensor:
+        """The MLP's outputs, the prior's action added to the first ``action_dim`` (pre-tanh)."""
+        out = self.net(self.normalizer(obs))
+        if self.prior is None:
+            return out
+        a = self.action_dim
+        return torch.cat((out[..., :a] + self.prior(obs), out[..., a:]), -1)
 
     def forward(self, obs: Tensor) -> Tensor:
-        return self.squash(self.net(self.normalizer(obs))[..., : self.action_dim])
+        return self.squash(self.outputs(obs)[..., : self.action_dim])
 
     def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
         check_mlp_size(state_dict, self.config, "algo.actor.hidden={hidden} (PPO) or algo.hidden={hidden} (DAgger)")

@@ -159,7 +159,12 @@ def train(cfg, run_dir) -> dict:
             f"{low}..{high}: train the student with the teacher's env settings (env.u_max)"
         )
     student = DeterministicPolicy(
-        observation_size(student_view), low, high, hidden=list(a.hidden), activation=str(a.activation)
+        observation_size(student_view),
+        low,
+        high,
+        hidden=list(a.hidden),
+        activation=str(a.activation),
+        prior=student_view if a.get("prior") else None,
     ).to(device)
     optim = torch.optim.Adam(student.parameters(), lr=float(a.lr), weight_decay=float(a.weight_decay))
     buffer = TensorDictReplayBuffer(

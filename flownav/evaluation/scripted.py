@@ -10,7 +10,7 @@ import torch
 from torch import Tensor, nn
 
 from flownav.agents.networks import DeterministicPolicy
-from flownav.envs.kinematics import wrap_angle
+from flownav.agents.prior import head_to_target
 from flownav.envs.navigation import DPSI_MAX, DTHETA_MAX
 from flownav.evaluation.oracle import Oracle
 
@@ -22,33 +22,15 @@ def action_high(u_max: float = 1.0) -> tuple[float, float, float]:
 
 
 class HeadToTarget(nn.Module):
-    """Geo observation (to_target, velocity, theta, psi) -> (speed, turn rates towards the target).
-
-    Speed: u_max times the cosine between heading and target direction (at least 5%)."""
+    """Geo observation (to_target, velocity, theta, psi) -> (speed, turn rates towards the target)
+    (:func:`flownav.agents.prior.head_to_target`)."""
 
     def __init__(self, u_max: float = 1.0, speed_fraction: float = 0.98):
         super().__init__()
         self.u_max, self.speed_fraction = float(u_max), float(speed_fraction)
 
     def forward(self, obs: Tensor) -> Tensor:
-        d = obs[..., :3]
-        theta, psi = obs[..., 6], obs[..., 7]
-        theta_d = torch.atan2(d[..., 1], d[..., 0])
-        psi_d = torch.asin((d[..., 2] / d.norm(dim=-1).clamp_min(1e-6)).clamp(-1, 1))
-        # f(e) = sin e + (1 - cos e) / 2 is continuous and 2 pi periodic in the heading error e: zero (stable)
-        # at e = 0, positive (turn left) when the target is behind, so a small network can fit it.
-        err = wrap_angle(theta_d - theta)
-        f = torch.sin(err) + 0.5 * (1 - torch.cos(err))
-        dtheta = DTHETA_MAX * 0.95 * torch.tanh(3 * f)
-        dpsi = DPSI_MAX * 0.95 * torch.tanh(3 * (psi_d - psi))
-        # Swim slowly while facing away (no orbiting the target); stay below the bounds so that a
-        # tanh-squashed network can match it without saturating.
-        heading = torch.stack(
-            (torch.cos(psi) * torch.cos(theta), torch.cos(psi) * torch.sin(theta), torch.sin(psi)), -1
-        )
-        facing = (heading * d).sum(-1) / d.norm(dim=-1).clamp_min(1e-6)
-        speed = self.u_max * self.speed_fraction * facing.clamp(0.05, 1.0)
-        return torch.stack((speed, dtheta, dpsi), -1)
+        return head_to_target(obs[..., :3], obs[..., 6], obs[..., 7], self.u_max, self.speed_fraction)
 
 
 class Passive(nn.Module):

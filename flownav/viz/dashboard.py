@@ -10,6 +10,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from flownav.envs.navigation import Status
+from flownav.flows.families import FlowFamily
 from flownav.viz.fields import symmetric_levels, xy_slice
 
 STATUS_STYLE = {  # outcome -> line style, so failures stand out at a glance
@@ -22,15 +23,17 @@ STATUS_STYLE = {  # outcome -> line style, so failures stand out at a glance
 
 def eval_trajectories_figure(traj: dict, flow, title: str = ""):
     """Top view (x-y) of recorded episodes (``run_episodes(..., record=k).trajectories``) over the z-vorticity
-    of the first episode's start plane at its start time; start (dot) and target (star) of each, style by outcome."""
+    of the first episode's start plane at its start time; start (dot) and target (star) of each, style by outcome.
+    A flow family has no one field to draw (every swimmer has its own flow): its figure has the paths alone."""
     episodes = traj["position"].shape[0]
     b = flow.bounds
-    start = traj["position"][0, 0].numpy()
-    X, Y, _, om = xy_slice(flow, float(start[2]), float(traj["t0"][0]), (b.lo[0], b.hi[0], b.lo[1], b.hi[1]), (120, 72))
-    om, levels = symmetric_levels(om)
     fig, ax = plt.subplots(figsize=(6.4, 6.4 * (b.hi[1] - b.lo[1]) / (b.hi[0] - b.lo[0]) + 0.6))
-    cs = ax.contourf(X, Y, om, levels=levels, cmap="RdBu_r", alpha=0.8)
-    fig.colorbar(cs, ax=ax, label="omega_z D / U", fraction=0.03, pad=0.02, format="%.2g")
+    if not isinstance(flow, FlowFamily):
+        z0, t0 = float(traj["position"][0, 0, 2]), float(traj["t0"][0])
+        X, Y, _, om = xy_slice(flow, z0, t0, (b.lo[0], b.hi[0], b.lo[1], b.hi[1]), (120, 72))
+        om, levels = symmetric_levels(om)
+        cs = ax.contourf(X, Y, om, levels=levels, cmap="RdBu_r", alpha=0.8)
+        fig.colorbar(cs, ax=ax, label="omega_z D / U", fraction=0.03, pad=0.02, format="%.2g")
     for ob in getattr(flow, "obstacles", ()):
         ax.add_patch(plt.Circle(ob.center, ob.radius, color="0.3"))
     outcomes = set()

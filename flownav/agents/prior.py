@@ -1,0 +1,79 @@
+"""Head-to-target: the reference controller, and the prior a policy's network can correct.
+
+``head_to_target(d, theta, psi, u_max)`` turns the heading (theta, psi) towards the target direction ``d``
+and swims at full speed when facing it. It is the scripted reference of every evaluation
+(:class:`flownav.evaluation.scripted.HeadToTarget`) and, as :class:`HeadToTargetPrior`, the starting point of
+the generalist's networks: their output is added to head-to-target's action before the tanh squash, so an
+untrained (zero-output) network already swims straight at the target, and training learns where the flow
+makes another action better. Where the network has learned nothing (a flow unlike any it saw) the policy
+falls back towards head-to-target rather than towards an arbitrary action.
+
+Every view carries the target direction: geo views in the inertial frame with the heading's angles, ego views
+in the body frame, where the heading is (theta, psi) = (0, 0) by construction. In the body frame the turn
+rates are the inertial ones up to cos psi (the yaw turns about the inertial vertical), which is enough for a
+prior: the network corrects the rest.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+from torch import Tensor, nn
+
+from flownav.envs.core import DPSI_MAX, DTHETA_MAX
+from flownav.envs.kinematics import heading_vector, wrap_angle
+
+
+def head_to_target(d: Tensor, theta: Tensor, psi: Tensor, u_max: float = 1.0, speed_fraction: float = 0.98) -> Tensor:
+    """Action (speed, dtheta, dpsi) ``[..., 3]`` that turns the heading (theta, psi) towards ``d``.
+
+    Speed: ``u_max * speed_fraction`` times the cosine between heading and target direction (at least 5%):
+    slow while facing away, so the swimmer turns on the spot instead of orbiting the target. Every component
+    stays inside the action box (0.95 of the turn bounds), so a tanh-squashed output can represent it."""
+    theta_d = torch.atan2(d[..., 1], d[..., 0])
+    psi_d = torch.asin((d[..., 2] / d.norm(dim=-1).clamp_min(1e-6)).clamp(-1, 1))
+    # f(e) = sin e + (1 - cos e) / 2 is continuous and 2 pi periodic in the heading error e: zero (stable)
+    # at e = 0, positive (turn left) when the target is behind, so a small network can fit it.
+    err = wrap_angle(theta_d - theta)
+    f = torch.sin(err) + 0.5 * (1 - torch.cos(err))
+    dtheta = DTHETA_MAX * 0.95 * torch.tanh(3 * f)
+    dpsi = DPSI_MAX * 0.95 * torch.tanh(3 * (psi_d - psi))
+    facing = (heading_vector(theta, psi) * d).sum(-1) / d.norm(dim=-1).clamp_min(1e-6)
+    speed = u_max * speed_fraction * facing.clamp(0.05, 1.0)
+    return torch.stack((speed, dtheta, dpsi), -1)
+
+
+def target_and_heading(obs: Tensor, view: str) -> tuple[Tensor, Tensor, Tensor]:
+    """(target direction, theta, psi) read from an observation of ``view``."""
+    d = obs[..., :3]
+    if view.startswith("ego"):  # body frame: the heading is the x axis
+        zero = torch.zeros_like(d[..., 0])
+        return d, zero, zero
+    if view == "geo" or view == "geo_flow":  # (d, velocity, theta, psi)
+        return d, obs[..., 6], obs[..., 7]
+    if view.startswith("geo"):  # (d, velocity, cos theta, sin theta, psi, ...)
+        return d, torch.atan2(obs[..., 7], obs[..., 6]), obs[..., 8]
+    raise ValueError(f"view {view!r} carries no target direction for the head-to-target prior; use a geo or ego view")
+
+
+PRIORS = ("head_to_target",)
+
+
+class HeadToTargetPrior(nn.Module):
+    """Observation of ``view`` -> head-to-target's action in the network's pre-tanh coordinates
+    (the inverse of :class:`~flownav.agents.networks.SquashedAction`)."""
+
+    def __init__(self, view: str, low: Sequence[float], high: Sequence[float]):
+        super().__init__()
+        target_and_heading(torch.zeros(1, 9), view)  # refuse a view without a target direction now
+        self.view = view
+        # The box is in the policy's config; not persistent, so a checkpoint's state_dict is the weights alone.
+        self.register_buffer("low", torch.as_tensor(low, dtype=torch.float32), persistent=False)
+        self.register_buffer("high", torch.as_tensor(high, dtype=torch.float32), persistent=False)
+
+    def forward(self, obs: Tensor) -> Tensor:
+        d, theta, psi = target_and_heading(obs, self.view)
+        action = head_to_target(d, theta, psi, u_max=float(self.high[0]))
+        unit = (2 * (action - self.low) / (self.high - self.low) - 1).clamp(-0.999, 0.999)
+        return torch.atanh(unit)
