@@ -26,7 +26,6 @@ the run stopped. The run's record (final metrics, loss curve) is ``<run>/results
 
 from __future__ import annotations
 
-import hashlib
 import json
 import time
 from pathlib import Path
@@ -50,6 +49,7 @@ from flownav.episode_window import EpisodeWindow, with_episode_return
 from flownav.errors import CheckpointError, ConfigError
 from flownav.evaluation.protocol import EvalSpec, evaluate
 from flownav.paths import resolve
+from flownav.provenance import sha256
 from flownav.runlog import RunLogger, run_summary
 
 STUDENT_VIEWS = ("ego", "ego_flow", "ego_up", "ego_mem", "geo", "geo_flow")
@@ -145,7 +145,7 @@ def train(cfg, run_dir) -> dict:
             f"({', '.join(GEO_VIEWS)}): pass a teacher's checkpoint "
             "(python train.py +experiment=teacher)"
         )
-    teacher_sha = hashlib.sha256(resolve(str(cfg.teacher_checkpoint)).read_bytes()).hexdigest()[:12]
+    teacher_sha = sha256(resolve(str(cfg.teacher_checkpoint)))
     flow = build_flow(cfg.flow, device=device)
     task = build_task(cfg.task, flow)
     env = build_env(

@@ -22,7 +22,6 @@ On-disk format ``flownav-grid-v1``: a directory holding
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -37,6 +36,7 @@ from flownav import schema
 from flownav.atomic import atomic_write
 from flownav.errors import DataError
 from flownav.flows.base import Box, Cylinder, FlowField, obstacle_from_dict
+from flownav.provenance import sha256
 
 FORMAT = "flownav-grid-v1"
 VELOCITY_FILE = "velocity.npy"
@@ -192,14 +192,6 @@ def check_velocity_array(shape: Sequence[int], all_finite: bool) -> None:
         )
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 22), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def save_grid_flow(
     path: str | os.PathLike,
     velocity: np.ndarray,
@@ -243,7 +235,7 @@ def save_grid_flow(
         "units": units or DEFAULT_UNITS,
         "provenance": provenance or {},
         "diagnostics": diagnostics or {},
-        "sha256": {VELOCITY_FILE: _sha256(path / VELOCITY_FILE)},
+        "sha256": {VELOCITY_FILE: sha256(path / VELOCITY_FILE, None)},
     }
     text = json.dumps(meta, indent=2).encode()
     atomic_write(path / META_FILE, lambda f: f.write(text))
@@ -307,7 +299,7 @@ def load_grid_flow(path: str | os.PathLike, device="cpu", dtype=torch.float32, v
     if meta["format"] != FORMAT:
         raise GridFlowError(f"{meta_path} has format {meta['format']!r}, flownav reads {FORMAT!r}")
     if verify:
-        digest = _sha256(vel_path)
+        digest = sha256(vel_path, None)
         if digest != meta["sha256"].get(VELOCITY_FILE):
             raise GridFlowError(
                 f"{vel_path} does not match the sha256 in {meta_path} (corrupt or partial file, "
