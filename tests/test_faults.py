@@ -3,6 +3,7 @@ resumes bit for bit; quick tries and refused resumes leave shipped files and oth
 
 from __future__ import annotations
 
+import argparse
 import csv
 import hashlib
 import math
@@ -11,6 +12,7 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from unittest import mock
 
 import pytest
 import torch
@@ -363,3 +365,50 @@ def test_resume_accepts_only_a_run_directory_and_writes_nothing_before_its_check
         train.run(compose_train(*STUDENT_SMOKE, f"resume={policy_file}"), tmp_path / "run")
     assert sorted(p.name for p in fake.rglob("*")) == ["checkpoints", "config.yaml", "last.pt"]
     assert not (tmp_path / "run").exists() and tree_digest(*SHIPPED) == before
+
+
+class _Parsed(Exception):
+    """Raised instead of parsing: carries the command line's parser."""
+
+    def __init__(self, parser):
+        self.parser = parser
+
+
+def parser_of(main) -> argparse.ArgumentParser:
+    """The argparse parser a command's ``main`` builds (stopped before it parses anything)."""
+
+    def stop(self, *args, **kwargs):
+        raise _Parsed(self)
+
+    with mock.patch.object(argparse.ArgumentParser, "parse_known_args", stop), pytest.raises(_Parsed) as e:
+        main([])
+    return e.value.parser
+
+
+def path_defaults(parser, prefix=""):
+    """(option, default) of every path-like option of a parser and its sub-commands."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from path_defaults(sub, f"{prefix}{name} ")
+        elif any(w in action.dest for w in ("out", "json", "dir", "ship")) and isinstance(action.default, str | Path):
+            yield f"{prefix}{action.option_strings[0] if action.option_strings else action.dest}", action.default
+
+
+def test_no_command_line_default_writes_into_a_shipped_place():
+    """Every output a command writes by default lies outside checkpoints/, results/, data/ and REPORT.md (and the
+    README's figures, docs/figures); the shipped places are written only when an option names them."""
+    from flownav.algorithms import report
+    from flownav.cfd import __main__ as cfd
+    from flownav.shipping import is_shipped
+    from flownav.viz import interactive, plots
+
+    defaults = [
+        d for main in (cfd.main, interactive.main, plots.main, report.main) for d in path_defaults(parser_of(main))
+    ]
+    assert {"generate --run-dir", "plot --out-dir", "--out"} <= {name for name, _ in defaults}
+    shipped = [(name, str(v)) for name, v in defaults if is_shipped(v) or Path(v).parts[:2] == ("docs", "figures")]
+    assert shipped == []
+    from flownav.export import parse_arguments
+
+    assert parse_arguments(["checkpoint=checkpoints/student.pt"])["out"] is None  # -> exports/<name>.onnx

@@ -3,7 +3,8 @@
 generate  run the 3D Re = 300 wake (resumes from --run-dir) and write the dataset to --out
           (default <run-dir>/dataset; the shipped data/cylinder_re300 only when --out names it)
 validate  2D Re = 100 check against the literature + a 3D dataset's diagnostics
-plot      z-vorticity slice and Q-criterion view of a wake dataset -> docs/figures/
+plot      z-vorticity slice and Q-criterion view of a wake dataset -> --out-dir
+          (default runs/cfd/figures; the README's figures only when --out-dir names docs/figures)
 
 Lengths are in cylinder diameters D, velocities in the inflow speed U, times in D/U.
 Set FLOWNAV_DEBUG=1 to see the traceback of an error.
@@ -90,7 +91,12 @@ def parser() -> argparse.ArgumentParser:
 
     plot = sub.add_parser("plot", help="wake figures", formatter_class=_Help)
     plot.add_argument("--dataset", type=Path, default=SHIPPED_DATASET, help="wake dataset to draw")
-    plot.add_argument("--out-dir", type=Path, default=Path("docs/figures"), help="where wake_*.png go")
+    plot.add_argument(
+        "--out-dir",
+        type=Path,
+        default=Path("runs/cfd/figures"),
+        help="where wake_*.png go (the README's figures: --out-dir docs/figures)",
+    )
     plot.add_argument("--frame", type=int, default=0, help="frame index")
     return top
 

@@ -94,8 +94,10 @@ def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=main.__doc__)
     p.add_argument("globs", nargs="+", help="globs of metrics.csv files, e.g. 'multirun/student/*/*/metrics.csv'")
     p.add_argument("--key", default="train/loss")
-    p.add_argument("--out", default="results/figures/student_loss.png")
-    p.add_argument("--json", default="results/student_loss.json")
+    # No default: the shipped results/figures/student_loss.png and results/student_loss.json come from
+    # python evaluate.py +experiment=paper_loss_curves ship=true; a try writes where it is told.
+    p.add_argument("--out", required=True, help="the PNG to write, e.g. outputs/student_loss.png")
+    p.add_argument("--json", required=True, help="the curve's statistics (JSON), e.g. outputs/student_loss.json")
     a = p.parse_args(argv)
     runs = collect_loss_runs(a.globs, a.key)
     if not runs:
