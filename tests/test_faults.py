@@ -157,6 +157,23 @@ def test_ppo_stops_on_a_non_finite_optimiser_setting(tmp_path, monkeypatch):
     assert not (tmp_path / "checkpoints" / "last.pt").exists()
 
 
+def test_ppo_stops_on_a_non_finite_update_and_keeps_the_last_finite_checkpoint(tmp_path, monkeypatch):
+    import train
+    from flownav.algorithms import ppo
+
+    train.run(compose_train(*PPO_TINY, "algo.total_frames=4096"), tmp_path)  # 2 iterations of 128 x 16
+    last = tmp_path / "checkpoints" / "last.pt"
+    before = last.read_bytes()
+    bypass_validation(monkeypatch, ppo)
+    cfg = compose_train(*PPO_TINY, "algo.total_frames=8192", "algo.lr=inf", f"resume={tmp_path}")
+    with pytest.raises(
+        NonFiniteError, match=rf"PPO iteration 3: .*\(the last finite checkpoint is {re.escape(str(last))}\)"
+    ):
+        ppo.train(cfg, tmp_path)
+    assert last.read_bytes() == before  # iteration 2, finite
+    assert load_checkpoint(last)["train_state"]["iteration"] == 2
+
+
 def test_dagger_stops_on_grad_clip_nan_and_keeps_the_last_finite_checkpoint(teacher_ckpt, tmp_path, monkeypatch):
     import train
     from flownav.algorithms import dagger
@@ -183,6 +200,14 @@ def test_a_non_finite_checkpoint_is_never_written(tmp_path):
     with pytest.raises(NonFiniteError, match=r"refusing to write .*x\.pt: policy\.state_dict\.net\.0\.weight"):
         save_policy_checkpoint(tmp_path / "x.pt", policy, "geo", "teacher")
     assert not any(tmp_path.iterdir())
+    # A non-finite file made some other way is never shipped (copied to checkpoints/) either.
+    from flownav.checkpoint import FORMAT, ship_checkpoint
+
+    payload = {"format": FORMAT, "obs": "geo", "role": "teacher", "meta": {}, "train_state": {"frames": 1}}
+    torch.save(payload | {"policy": {"config": policy.config, "state_dict": policy.state_dict()}}, tmp_path / "nan.pt")
+    with pytest.raises(NonFiniteError, match=r"refusing to write .*shipped\.pt: policy\.state_dict\.net\.0\.weight"):
+        ship_checkpoint(tmp_path / "nan.pt", tmp_path / "shipped.pt")
+    assert not (tmp_path / "shipped.pt").exists()
 
 
 # ----------------------------------------------------------------------------- exact resume
@@ -227,6 +252,7 @@ def test_ppo_resumes_bit_for_bit_after_a_failure(tmp_path, monkeypatch):
     assert load_checkpoint(tmp_path / "part" / "checkpoints" / "last.pt")["train_state"]["iteration"] == 2
     train.run(compose_train(*PPO_TINY, budget, f"resume={tmp_path / 'part'}"), tmp_path / "unused")
     a, b = tmp_path / "straight" / "checkpoints" / "last.pt", tmp_path / "part" / "checkpoints" / "last.pt"
+    print(f"\nPPO resume: max |difference| of the final weights = {max_weight_difference(a, b)}")  # pytest -s
     assert max_weight_difference(a, b) == 0.0
     ca, cb = (load_checkpoint(p)["train_state"]["critic"] for p in (a, b))
     assert all(torch.equal(ca[k], cb[k]) for k in ca)
@@ -249,6 +275,7 @@ def test_dagger_resumes_bit_for_bit_after_a_failure(teacher_ckpt, tmp_path, monk
     assert part["iteration"] == 3 and len(part["buffer"]["obs"]) == 1500  # one file, the filled part
     train.run(dagger_cfg(teacher_ckpt, "algo.iterations=5", f"resume={tmp_path / 'part'}"), tmp_path / "unused")
     a, b = tmp_path / "straight" / "checkpoints" / "last.pt", tmp_path / "part" / "checkpoints" / "last.pt"
+    print(f"\nDAgger resume: max |difference| of the final weights = {max_weight_difference(a, b)}")  # pytest -s
     assert max_weight_difference(a, b) == 0.0
     assert not list((tmp_path / "part" / "checkpoints").glob("buffer*"))
 
