@@ -83,13 +83,21 @@ def safe_torch_load(path, safe_globals=()):
             return torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as e:  # what weights_only refuses: a global it does not allow
         found = re.search(r"GLOBAL (\S+)|but got <class '([^']+)'>", str(e))
-        what = (found.group(1) or found.group(2)) if found else "an object that is not a tensor or plain data"
+        if not found:  # no refused global named: not a pickle, or opcodes weights_only never reads
+            raise CheckpointError(_unreadable(path, "nothing a weights-only load can read")) from e
         raise CheckpointError(
-            f"refused to load {path}: it asks for {what}, which loading could run as code; "
-            "load only checkpoints written by flownav (tensors, numbers, strings, lists, dicts)"
+            f"refused to load {path}: it asks for {found.group(1) or found.group(2)}, which loading could run as "
+            "code; load only checkpoints written by flownav (tensors, numbers, strings, lists, dicts)"
         ) from e
     except Exception as e:  # noqa: BLE001 - any other unpickling failure means a corrupt file
-        raise CheckpointError(f"cannot read checkpoint {path} ({e}); it is corrupt or not a flownav checkpoint") from e
+        raise CheckpointError(_unreadable(path, " ".join(str(e).split()).split(". ")[0][:160])) from e
+
+
+def _unreadable(path, reason: str) -> str:
+    return (
+        f"cannot read checkpoint {path}: it is truncated, corrupt or not a torch file ({reason}); "
+        "use a checkpoint written by flownav (a run's checkpoints/last.pt or best.pt)"
+    )
 
 
 # ----------------------------------------------------------------------------- training state (exact resume)
