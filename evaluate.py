@@ -9,7 +9,7 @@
 
 Without ``ship=true`` (or an explicit ``report=`` / ``results=`` / ``figures_dir=``) the suite writes its report,
 results and figures into its own run directory (Hydra's output dir); shipping a reduced episode count
-(``max_episodes``) is refused.
+(``max_episodes``, or ``suite.<name>.episodes=`` on the command line) is refused.
 
 Episodes are deterministic (the policy's mean action) and counted exactly: one per env slot, no
 auto-reset. See docs/evaluation.md.
@@ -109,6 +109,21 @@ def suite_outputs(cfg: DictConfig) -> None:
             f"max_episodes={cfg.max_episodes} caps the episode count: a reduced run never writes {shipped[0]}; "
             "drop ship=true (and the explicit report=/results=/figures_dir=) for a try, or drop max_episodes"
         )
+    keys = [(o, o.split("=")[0].lstrip("+~")) for o in command_line_overrides()]
+    changed = [o for o, k in keys if k.startswith(("suite.", "policies.")) and k.endswith("episodes")]
+    if shipped and changed:
+        raise ConfigError(
+            f"{changed[0]} changes an experiment's episode count: only the counts in conf/evaluate/experiment/ "
+            f"write {shipped[0]}; drop ship=true (and the explicit report=/results=/figures_dir=) for a try"
+        )
+
+
+def command_line_overrides() -> list[str]:
+    """The overrides this run was started with (none outside Hydra, e.g. evaluate.run() from Python)."""
+    try:
+        return list(HydraConfig.get().overrides.task)
+    except ValueError:
+        return []
 
 
 def run_paper(cfg: DictConfig, log=print) -> dict:

@@ -353,6 +353,21 @@ def test_shipping_a_partial_run_is_refused_before_anything_is_written(tmp_path):
     assert tree_digest(*SHIPPED) == before
 
 
+@pytest.mark.slow
+def test_shipping_an_evaluation_with_a_changed_episode_count_is_refused(tmp_path):
+    """ship=true writes REPORT.md and results/ only with the experiments' own episode counts."""
+    before = tree_digest(*SHIPPED)
+    cmd = [sys.executable, "evaluate.py", "+experiment=paper_training", "ship=true", "suite.training.episodes=50"]
+    out = subprocess.run([*cmd, f"hydra.run.dir={tmp_path}"], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert (
+        out.stderr.strip()
+        .splitlines()[-1]
+        .startswith("error: suite.training.episodes=50 changes an experiment's episode count: only the counts in ")
+    )
+    assert tree_digest(*SHIPPED) == before
+
+
 def test_ship_copies_a_finished_run_without_its_resume_state(tmp_path, monkeypatch):
     """ship=true at the experiment's budget (shrunk here) copies the policy (no env state, no buffer) and record."""
     import train
