@@ -191,8 +191,8 @@ def find_resume(resume) -> tuple[Path, Path]:
         raise ConfigError(f"resume={resume}: no such run directory; pass a run directory (outputs/<name>/<run>)")
     if not any((run_dir / c).is_file() for c in RUN_CONFIGS):
         raise ConfigError(
-            f"resume={resume}: {run_dir} is not a run directory (no config.yaml); pass the directory of the run "
-            "to continue (outputs/<name>/<run>), not a shipped checkpoint"
+            f"resume={resume}: {run_dir.resolve()} is not a run directory (no config.yaml); pass the directory of "
+            "the run to continue (outputs/<name>/<run>), not a shipped checkpoint"
         )
     if not ckpt.is_file():
         raise ConfigError(f"resume={resume}: no {ckpt.relative_to(run_dir)} in that run directory")
