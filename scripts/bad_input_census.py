@@ -86,6 +86,8 @@ CASES = [
     ("cfd_spacing_zero", [*CFD, "--out-spacing", "0", "--run-dir", "{tmp}/cfd6"], "--out-spacing"),
     ("cfd_span_zero", [*CFD, "--span", "0", "--run-dir", "{tmp}/cfd7"], "--span"),
     ("cfd_re_negative", [*CFD, "--re", "-3", "--run-dir", "{tmp}/cfd8"], "Re"),
+    ("cfd_warmup_not_a_number", [*CFD, "--warmup", "abc", "--run-dir", "{tmp}/cfd10"], "--warmup"),
+    ("cfd_unknown_command", ["-m", "flownav.cfd", "generat"], "invalid choice: 'generat'"),
     ("cfd_checkpoint_every_negative", [*CFD, "--checkpoint-every", "-1", "--run-dir", "{tmp}/cfd9"], "--checkpoint"),
     (
         "cfd_other_setup_in_run_dir",

@@ -285,6 +285,32 @@ def test_bad_input_gives_one_line_naming_the_key(case, expected, files, tmp_path
     assert not files["marker"].exists()  # nothing ran from a checkpoint
 
 
+CFD = "python -m flownav.cfd"
+
+
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (
+            ["generate", "--warmup", "abc"],
+            f"{CFD} generate: argument --warmup: invalid float value: 'abc'; see {CFD} generate --help",
+        ),
+        (
+            ["generat"],
+            f"{CFD}: argument cmd: invalid choice: 'generat' (choose from 'generate', 'validate', 'plot'); "
+            f"see {CFD} --help",
+        ),
+    ],
+    ids=["not_a_number", "unknown_command"],
+)
+def test_cfd_argument_errors_are_one_line(argv, expected, capsys):
+    from flownav.cfd.__main__ import parser
+
+    with pytest.raises(SystemExit) as stop:
+        parser().parse_args(argv)
+    assert stop.value.code == 2 and capsys.readouterr().err == f"error: {expected}\n"
+
+
 def _entry_point(args, **env):
     return subprocess.run(
         [sys.executable, *args],

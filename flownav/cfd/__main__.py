@@ -30,6 +30,14 @@ class _Help(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpF
     """Keep the description's layout and append every option's default."""
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors as the other entry points give them: one line ``error: ...``, exit status 2."""
+
+    def error(self, message: str):
+        print(f"error: {self.prog}: {message}; see {self.prog} --help", file=sys.stderr, flush=True)
+        raise SystemExit(2)
+
+
 def _sim_args(p: argparse.ArgumentParser, defaults: SimConfig) -> None:
     p.add_argument("--re", type=float, default=defaults.re, help="Reynolds number U D / nu")
     p.add_argument("--cells-per-d", type=int, default=defaults.cells_per_d, help="lattice cells per diameter D")
@@ -47,7 +55,7 @@ def _sim_args(p: argparse.ArgumentParser, defaults: SimConfig) -> None:
 
 
 def parser() -> argparse.ArgumentParser:
-    top = argparse.ArgumentParser(prog="python -m flownav.cfd", description=__doc__, formatter_class=_Help)
+    top = _Parser(prog="python -m flownav.cfd", description=__doc__, formatter_class=_Help)
     top.add_argument("--threads", type=int, default=2, help="torch / OpenMP threads")
     top.add_argument("--device", default="cpu", help="torch device (cpu runs the C kernel)")
     sub = top.add_subparsers(dest="cmd", required=True)
