@@ -171,7 +171,33 @@ def load_checkpoint(path) -> dict:
             f"{path} lacks {missing[0]!r}: it is an incomplete {FORMAT} checkpoint; use the run's last.pt or "
             "best.pt, or a file written by save_policy_checkpoint"
         )
+    require_consistent_policy(path, policy)
     return payload
+
+
+def require_consistent_policy(path, policy: dict) -> None:
+    """Refuse (one line) a checkpoint whose ``policy.config`` builds no policy or whose ``policy.state_dict`` is not
+    that policy's: a key missing or extra, or a tensor of another shape (a corrupt or hand-edited file)."""
+    fix = "the file is corrupt or was edited; use the run's last.pt or best.pt, or a file written by flownav"
+    try:  # shapes only: on the meta device, and the RNG as it was (a run's seeded draws must not move)
+        with torch.random.fork_rng(devices=[]), torch.device("meta"):
+            expected = DeterministicPolicy(**policy["config"]).state_dict()
+    except (TypeError, ValueError) as e:
+        raise CheckpointError(f"{path}: policy.config builds no flownav policy ({e}); {fix}") from e
+    saved = policy["state_dict"]
+    if not isinstance(saved, dict):
+        raise CheckpointError(f"{path}: policy.state_dict is a {type(saved).__name__}, not a dict of tensors; {fix}")
+    missing = sorted(set(expected) - set(saved))
+    extra = sorted(set(saved) - set(expected))
+    if missing or extra:
+        what = f"lacks {missing[:3]}" if missing else f"has unknown entries {extra[:3]}"
+        raise CheckpointError(f"{path}: policy.state_dict {what} for its policy.config; {fix}")
+    for key, t in expected.items():
+        if not torch.is_tensor(saved[key]) or saved[key].shape != t.shape:
+            shape = tuple(saved[key].shape) if torch.is_tensor(saved[key]) else type(saved[key]).__name__
+            raise CheckpointError(
+                f"{path}: policy.state_dict.{key} is {shape}, its policy.config makes it {tuple(t.shape)}; {fix}"
+            )
 
 
 RUN_CONFIGS = ("config.yaml", ".hydra/config.yaml")  # what train.py (and Hydra) write into every run directory

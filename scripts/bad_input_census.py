@@ -67,6 +67,8 @@ CASES = [
     ("evaluate_cuda", [*EVALUATE, "device=cuda"], "device=cuda"),
     ("train_hidden_mismatch", [*TRAIN, "algo.init_from={small}"], "hidden=[16]"),
     ("evaluate_missing_policy_key", [*EVALUATE, "checkpoint={nopolicy}"], "lacks 'policy'"),
+    ("evaluate_edited_config", [*EVALUATE, "checkpoint={noobsdim}"], "policy.config builds no flownav policy"),
+    ("train_edited_weights", [*TRAIN, "algo.init_from={noweight}"], "policy.state_dict lacks ['normalizer.mean']"),
     ("evaluate_no_such_checkpoint", [*EVALUATE, "checkpoint={tmp}/none.pt"], "no checkpoint at"),
     ("evaluate_not_a_checkpoint", [*EVALUATE, "checkpoint={garbage}"], "cannot read checkpoint"),
     ("evaluate_truncated_checkpoint", [*EVALUATE, "checkpoint={truncated}"], "cannot read checkpoint"),
@@ -131,6 +133,15 @@ def make_files(tmp: Path) -> dict:
     del payload["policy"]
     torch.save(payload, tmp / "nopolicy.pt")
     f["nopolicy"] = tmp / "nopolicy.pt"
+    # hand-edited checkpoints: a config without obs_dim, weights without the normaliser's mean
+    for name, edit in (
+        ("noobsdim", lambda p: p["config"].pop("obs_dim")),
+        ("noweight", lambda p: p["state_dict"].pop("normalizer.mean")),
+    ):
+        payload = torch.load(f["small"], weights_only=True)
+        edit(payload["policy"])
+        torch.save(payload, tmp / f"{name}.pt")
+        f[name] = tmp / f"{name}.pt"
     (tmp / "garbage.pt").write_bytes(b"not a checkpoint at all")
     f["garbage"] = tmp / "garbage.pt"
     (tmp / "truncated.pt").write_bytes((ROOT / "checkpoints" / "student.pt").read_bytes()[:3000])  # a cut copy

@@ -219,6 +219,16 @@ CASES = [
     ),
     ("malicious", evaluate_case("checkpoint={evil}"), EVIL),
     (
+        "edited_config",
+        evaluate_case("checkpoint={noobsdim}"),
+        "{noobsdim}: policy.config builds no flownav policy (DeterministicPolicy.__init__() missing 1 required positional argument: 'obs_dim'); the file is corrupt or was edited; use the run's last.pt or best.pt, or a file written by flownav",
+    ),
+    (
+        "edited_weights",
+        train_case("algo.init_from={noweight}", "algo.total_frames=1"),
+        "{noweight}: policy.state_dict lacks ['normalizer.mean'] for its policy.config; the file is corrupt or was edited; use the run's last.pt or best.pt, or a file written by flownav",
+    ),
+    (
         "not_a_checkpoint",
         evaluate_case("checkpoint={garbage}"),
         "cannot read checkpoint {garbage}: it is truncated, corrupt or not a torch file (nothing a weights-only load can read); use a checkpoint written by flownav (a run's checkpoints/last.pt or best.pt)",
