@@ -354,17 +354,26 @@ def test_shipping_a_partial_run_is_refused_before_anything_is_written(tmp_path):
 
 
 @pytest.mark.slow
-def test_shipping_an_evaluation_with_a_changed_episode_count_is_refused(tmp_path):
-    """ship=true writes REPORT.md and results/ only with the experiments' own episode counts."""
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (
+            ["suite.training.episodes=50"],
+            "error: suite.training.episodes=50 changes an experiment's episode count: only the counts in ",
+        ),
+        (["seed=0,1"], "error: a -m sweep writing results/paper.json: its jobs would race for one file; "),
+    ],
+    ids=["episodes_override", "sweep"],
+)
+def test_shipping_an_evaluation_is_refused_for_changed_counts_and_in_a_sweep(args, message, tmp_path):
+    """ship=true writes REPORT.md and results/ only with the experiments' own episode counts, from one run."""
     before = tree_digest(*SHIPPED)
-    cmd = [sys.executable, "evaluate.py", "+experiment=paper_training", "ship=true", "suite.training.episodes=50"]
-    out = subprocess.run([*cmd, f"hydra.run.dir={tmp_path}"], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    sweep = any("," in a for a in args)
+    cmd = [sys.executable, "evaluate.py", *(["-m"] if sweep else []), "+experiment=paper_training", "ship=true", *args]
+    cmd.append(f"hydra.{'sweep' if sweep else 'run'}.dir={tmp_path}")
+    out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert out.returncode == 2 and "Traceback" not in out.stderr
-    assert (
-        out.stderr.strip()
-        .splitlines()[-1]
-        .startswith("error: suite.training.episodes=50 changes an experiment's episode count: only the counts in ")
-    )
+    assert out.stderr.strip().splitlines()[-1].startswith(message)
     assert tree_digest(*SHIPPED) == before
 
 
