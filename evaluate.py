@@ -9,7 +9,7 @@
 
 Without ``ship=true`` (or an explicit ``report=`` / ``results=`` / ``figures_dir=``) the suite writes its report,
 results and figures into its own run directory (Hydra's output dir); shipping a reduced episode count
-(``max_episodes``) is refused.
+(``max_episodes``, or ``suite.<name>.episodes=`` on the command line) is refused.
 
 Episodes are deterministic (the policy's mean action) and counted exactly: one per env slot, no
 auto-reset. See docs/evaluation.md.
@@ -26,6 +26,7 @@ from pathlib import Path
 import hydra
 import torch
 from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
 from flownav import schema
@@ -95,11 +96,40 @@ def suite_outputs(cfg: DictConfig) -> None:
             here = here or run_dir()
             spec.json = str(here / Path(str(spec.json)).name)
     shipped = [str(cfg[k]) for k in SUITE_OUTPUTS if is_shipped(cfg[k])]
+    refuse_in_a_sweep(shipped)
     if shipped and cfg.get("max_episodes"):
         raise ConfigError(
             f"max_episodes={cfg.max_episodes} caps the episode count: a reduced run never writes {shipped[0]}; "
             "drop ship=true (and the explicit report=/results=/figures_dir=) for a try, or drop max_episodes"
         )
+    keys = [(o, o.split("=")[0].lstrip("+~")) for o in command_line_overrides()]
+    changed = [o for o, k in keys if k.startswith(("suite.", "policies.")) and k.endswith("episodes")]
+    if shipped and changed:
+        raise ConfigError(
+            f"{changed[0]} changes an experiment's episode count: only the counts in conf/evaluate/experiment/ "
+            f"write {shipped[0]}; drop ship=true (and the explicit report=/results=/figures_dir=) for a try"
+        )
+
+
+def refuse_in_a_sweep(shipped: list[str]) -> None:
+    """The jobs of a -m sweep would race for one shipped file (REPORT.md, results/...): refused."""
+    try:
+        multirun = HydraConfig.get().mode == RunMode.MULTIRUN
+    except ValueError:  # outside Hydra (evaluate.run() from Python): one run
+        return
+    if multirun and shipped:
+        raise ConfigError(
+            f"a -m sweep writing {shipped[0]}: its jobs would race for one file; drop ship=true (and the explicit "
+            "report=/results=/figures_dir=/output=) and ship one run"
+        )
+
+
+def command_line_overrides() -> list[str]:
+    """The overrides this run was started with (none outside Hydra, e.g. evaluate.run() from Python)."""
+    try:
+        return list(HydraConfig.get().overrides.task)
+    except ValueError:
+        return []
 
 
 def run_paper(cfg: DictConfig, log=print) -> dict:
@@ -131,6 +161,7 @@ def run(cfg: DictConfig, log=print) -> dict:
         torch.set_num_threads(int(cfg.threads))
     if cfg.get("suite"):
         return run_paper(cfg, log)
+    refuse_in_a_sweep([str(cfg.output)] if cfg.get("output") and is_shipped(cfg.output) else [])
     if cfg.get("output") and is_shipped(cfg.output) and int(cfg.episodes) < FULL_EPISODES:
         raise ConfigError(
             f"episodes={cfg.episodes} is below the {FULL_EPISODES} a shipped result ({cfg.output}) needs; "

@@ -82,13 +82,21 @@ def safe_torch_load(path, safe_globals=()):
             return torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as e:  # what weights_only refuses: a global it does not allow
         found = re.search(r"GLOBAL (\S+)|but got <class '([^']+)'>", str(e))
-        what = (found.group(1) or found.group(2)) if found else "an object that is not a tensor or plain data"
+        if not found:  # no refused global named: not a pickle, or opcodes weights_only never reads
+            raise CheckpointError(_unreadable(path, "nothing a weights-only load can read")) from e
         raise CheckpointError(
-            f"refused to load {path}: it asks for {what}, which loading could run as code; "
-            "load only checkpoints written by flownav (tensors, numbers, strings, lists, dicts)"
+            f"refused to load {path}: it asks for {found.group(1) or found.group(2)}, which loading could run as "
+            "code; load only checkpoints written by flownav (tensors, numbers, strings, lists, dicts)"
         ) from e
     except Exception as e:  # noqa: BLE001 - any other unpickling failure means a corrupt file
-        raise CheckpointError(f"cannot read checkpoint {path} ({e}); it is corrupt or not a flownav checkpoint") from e
+        raise CheckpointError(_unreadable(path, " ".join(str(e).split()).split(". ")[0][:160])) from e
+
+
+def _unreadable(path, reason: str) -> str:
+    return (
+        f"cannot read checkpoint {path}: it is truncated, corrupt or not a torch file ({reason}); "
+        "use a checkpoint written by flownav (a run's checkpoints/last.pt or best.pt)"
+    )
 
 
 # ----------------------------------------------------------------------------- training state (exact resume)
@@ -162,7 +170,33 @@ def load_checkpoint(path) -> dict:
             f"{path} lacks {missing[0]!r}: it is an incomplete {FORMAT} checkpoint; use the run's last.pt or "
             "best.pt, or a file written by save_policy_checkpoint"
         )
+    require_consistent_policy(path, policy)
     return payload
+
+
+def require_consistent_policy(path, policy: dict) -> None:
+    """Refuse (one line) a checkpoint whose ``policy.config`` builds no policy or whose ``policy.state_dict`` is not
+    that policy's: a key missing or extra, or a tensor of another shape (a corrupt or hand-edited file)."""
+    fix = "the file is corrupt or was edited; use the run's last.pt or best.pt, or a file written by flownav"
+    try:  # shapes only: on the meta device, and the RNG as it was (a run's seeded draws must not move)
+        with torch.random.fork_rng(devices=[]), torch.device("meta"):
+            expected = DeterministicPolicy(**policy["config"]).state_dict()
+    except (TypeError, ValueError) as e:
+        raise CheckpointError(f"{path}: policy.config builds no flownav policy ({e}); {fix}") from e
+    saved = policy["state_dict"]
+    if not isinstance(saved, dict):
+        raise CheckpointError(f"{path}: policy.state_dict is a {type(saved).__name__}, not a dict of tensors; {fix}")
+    missing = sorted(set(expected) - set(saved))
+    extra = sorted(set(saved) - set(expected))
+    if missing or extra:
+        what = f"lacks {missing[:3]}" if missing else f"has unknown entries {extra[:3]}"
+        raise CheckpointError(f"{path}: policy.state_dict {what} for its policy.config; {fix}")
+    for key, t in expected.items():
+        if not torch.is_tensor(saved[key]) or saved[key].shape != t.shape:
+            shape = tuple(saved[key].shape) if torch.is_tensor(saved[key]) else type(saved[key]).__name__
+            raise CheckpointError(
+                f"{path}: policy.state_dict.{key} is {shape}, its policy.config makes it {tuple(t.shape)}; {fix}"
+            )
 
 
 RUN_CONFIGS = ("config.yaml", ".hydra/config.yaml")  # what train.py (and Hydra) write into every run directory
@@ -182,8 +216,8 @@ def find_resume(resume) -> tuple[Path, Path]:
         raise ConfigError(f"resume={resume}: no such run directory; pass a run directory (outputs/<name>/<run>)")
     if not any((run_dir / c).is_file() for c in RUN_CONFIGS):
         raise ConfigError(
-            f"resume={resume}: {run_dir} is not a run directory (no config.yaml); pass the directory of the run "
-            "to continue (outputs/<name>/<run>), not a shipped checkpoint"
+            f"resume={resume}: {run_dir.resolve()} is not a run directory (no config.yaml); pass the directory of "
+            "the run to continue (outputs/<name>/<run>), not a shipped checkpoint"
         )
     if not ckpt.is_file():
         raise ConfigError(f"resume={resume}: no {ckpt.relative_to(run_dir)} in that run directory")

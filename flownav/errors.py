@@ -1,9 +1,9 @@
 """The errors a user can fix, and how the entry points report them.
 
 Each carries one line that names the key (or file) and the fix. ``train.py``, ``evaluate.py``,
-``python -m flownav.evaluation.selection`` and ``python -m flownav.cfd`` print that line and exit with
-status 2, without a traceback; set ``FLOWNAV_DEBUG=1`` to see the traceback. Any other exception is a
-bug and keeps its traceback.
+``python -m flownav.evaluation.selection``, ``python -m flownav.cfd`` and ``python -m flownav.export`` print that
+line and exit with status 2, without a traceback; set ``FLOWNAV_DEBUG=1`` to see the traceback. Any other
+exception is a bug and keeps its traceback.
 """
 
 from __future__ import annotations

@@ -21,8 +21,9 @@ from pathlib import Path
 import torch
 
 from flownav.atomic import atomic_write, atomic_write_text
-from flownav.checkpoint import CheckpointError, load_policy
+from flownav.checkpoint import load_policy
 from flownav.envs.observations import HISTORY_LEN, HISTORY_STRIDE
+from flownav.errors import ConfigError, reported_as_one_line
 from flownav.paths import REPO_ROOT, RESULTS_DIR, resolve
 from flownav.provenance import sha256
 
@@ -32,7 +33,7 @@ INPUT_NAME, OUTPUT_NAME = "observation", "action"
 PAPER_RESULTS = RESULTS_DIR / "paper.json"
 
 
-class ExportError(ValueError):
+class ExportError(ConfigError):
     """A bad argument of ``python -m flownav.export``; the message names the key and the fix."""
 
 
@@ -256,13 +257,12 @@ def parse_arguments(argv) -> dict:
 
 
 def main(argv=None) -> int:
-    try:
+    """Bad input (an argument, a checkpoint): ``error: <one line>`` on stderr, exit status 2, as train.py and
+    evaluate.py (FLOWNAV_DEBUG=1 shows the traceback)."""
+    with reported_as_one_line():
         args = parse_arguments(sys.argv[1:] if argv is None else argv)
         torch.set_num_threads(1)
         model, card = export_policy(args["checkpoint"], args["format"], args["out"])
-    except (ExportError, CheckpointError) as e:
-        print(f"flownav.export: {e}", file=sys.stderr)
-        return 2
     print(f"wrote {model} and its card {card}")
     return 0
 

@@ -2,19 +2,19 @@
 """Every class of bad input fails with one line that names the key (or file) and the fix.
 
 One parametrised test runs each case in-process and compares the exact message; a few representative
-cases also run the entry points (train.py, evaluate.py, python -m flownav.cfd) in a subprocess: exit
-status 2, the line on stderr, no traceback (unless FLOWNAV_DEBUG=1).
+cases also run the entry points (train.py, evaluate.py, python -m flownav.cfd, python -m flownav.export) in a
+subprocess: exit status 2, the line on stderr, no traceback (unless FLOWNAV_DEBUG=1). The full entry-point
+census of issue 13's list is scripts/bad_input_census.py (it also makes the files the cases here point at).
 """
 
 from __future__ import annotations
 
-import json
+import importlib.util
 import os
 import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
@@ -24,7 +24,7 @@ from flownav.checkpoint import save_policy_checkpoint
 from flownav.envs.observations import observation_size
 from flownav.errors import FlownavError, one_line
 from flownav.evaluation.scripted import ACTION_LOW, action_high
-from flownav.flows import Cylinder, load_grid_flow, save_grid_flow
+from flownav.flows import load_grid_flow
 
 ROOT = Path(__file__).resolve().parents[1]
 CONF = str(ROOT / "conf")
@@ -32,51 +32,28 @@ EVAL_CONF = str(ROOT / "conf" / "evaluate")
 TINY = ["flow=uniform", "logger=csv", "logger.progress=false", "threads=1"]
 
 
-class Evil:
-    """Unpickling this runs a shell command that leaves a marker file."""
+def _census():
+    """scripts/bad_input_census.py: the files every bad-input case points at, and the entry-point census."""
+    spec = importlib.util.spec_from_file_location("bad_input_census", ROOT / "scripts" / "bad_input_census.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
-    def __init__(self, marker: Path):
-        self.marker = marker
 
-    def __reduce__(self):
-        return (os.system, (f"touch {self.marker}",))
+census = _census()
 
 
 @pytest.fixture(scope="module")
 def files(tmp_path_factory) -> dict:
-    """Checkpoints and datasets the cases point at: {name: path}."""
+    """Checkpoints, run directories and datasets the cases point at: {name: path} (the census script's, and a
+    checkpoint whose critic has another size)."""
     root = tmp_path_factory.mktemp("bad")
-    small = DeterministicPolicy(observation_size("geo_sincos"), ACTION_LOW, action_high(), hidden=(16,), n_outputs=6)
-    f = {"marker": root / "marker", "small": save_policy_checkpoint(root / "small.pt", small, "geo_sincos", "teacher")}
+    f = census.make_files(root)
     from flownav.agents.actor_critic import CriticNet
 
     actor = DeterministicPolicy(observation_size("geo_sincos"), ACTION_LOW, action_high(), hidden=(64, 64), n_outputs=6)
     critic = {"critic": CriticNet(observation_size("geo_sincos"), [32], "tanh").state_dict()}
     f["critic"] = save_policy_checkpoint(root / "critic.pt", actor, "geo_sincos", "teacher", train_state=critic)
-    payload = torch.load(f["small"], weights_only=True)
-    del payload["policy"]
-    torch.save(payload, root / "nopolicy.pt")
-    f["nopolicy"] = root / "nopolicy.pt"
-    torch.save({"format": "flownav-policy-v1", "policy": Evil(f["marker"])}, root / "evil.pt")
-    f["evil"] = root / "evil.pt"
-    # A 3 x 3 x 2 grid around a cylinder at (1, 1): solid inside, a uniform stream outside.
-    vel = np.zeros((2, 3, 3, 2, 3), np.float32)
-    vel[..., 0] = 1.0
-    vel[:, 1, 1] = 0.0
-    for name in ("sha", "dt", "lo", "beyond", "shifted"):
-        f[name] = save_grid_flow(root / name, vel, (0, 0, 0), (1, 1, 1), 0.5, obstacles=[Cylinder((1.0, 1.0), 0.4)])
-    assert load_grid_flow(f["sha"]).shape == (2, 3, 3, 2)  # the unchanged dataset loads
-    edits = {
-        "sha": lambda m: m.update(sha256="abc"),
-        "dt": lambda m: m.update(dt="abc"),
-        "lo": lambda m: m["bounds"].pop("lo"),
-        "beyond": lambda m: m["bounds"].update(hi=[3.0, 2.0, 1.0]),
-        "shifted": lambda m: m.update(origin=[0.0, 1.0, 0.0], bounds={"lo": [0.0, 1.0, 0.0], "hi": [2.0, 3.0, 1.0]}),
-    }
-    for name, edit in edits.items():
-        meta = json.loads((f[name] / "meta.json").read_text())
-        edit(meta)
-        (f[name] / "meta.json").write_text(json.dumps(meta))
     return f
 
 
@@ -118,9 +95,24 @@ def cfd_case(*argv):
     def run(files, tmp_path):
         from flownav.cfd.__main__ import _run, parser
 
-        _run(parser().parse_args(["generate", "--run-dir", str(tmp_path), *argv]))
+        _run(parser().parse_args(["generate", "--run-dir", str(tmp_path), *(a.format(**files) for a in argv)]))
 
     return run
+
+
+def export_case(*argv):
+    def run(files, tmp_path):
+        from flownav.export import export_policy, parse_arguments
+
+        args = parse_arguments([a.format(**files) for a in argv])
+        export_policy(args["checkpoint"], args["format"], args["out"] or tmp_path / "policy.onnx")
+
+    return run
+
+
+# The tests' tiny wake lattice: passes GenerateConfig.check, builds in a second.
+TINY_CFD = "--re 100 --cells-per-d 4 --u-lattice 0.15 --x-range -5 26 --y-half 7.5 --span 2".split()
+TINY_CFD += "--warmup 12 --record 14 --frame-dt 0.45 --out-spacing 0.5".split()
 
 
 def without_cuda(case):
@@ -133,6 +125,8 @@ def without_cuda(case):
 
 
 SHA = "{sha}/meta.json"
+EVIL = "refused to load {evil}: it asks for posix.system, which loading could run as code; load only checkpoints written by flownav (tensors, numbers, strings, lists, dicts)"
+EVIL_RUN = EVIL.replace("{evil}", "{evil_run}/checkpoints/last.pt")
 # (id, case, the exact message after "error: ")
 CASES = [
     # wrong types and silent coercions
@@ -223,10 +217,43 @@ CASES = [
         evaluate_case("checkpoint={marker}.pt"),
         "no checkpoint at {marker}.pt: train one (python train.py +experiment=teacher) or fix the path",
     ),
+    ("malicious", evaluate_case("checkpoint={evil}"), EVIL),
     (
-        "malicious",
-        evaluate_case("checkpoint={evil}"),
-        "refused to load {evil}: it asks for posix.system, which loading could run as code; load only checkpoints written by flownav (tensors, numbers, strings, lists, dicts)",
+        "edited_config",
+        evaluate_case("checkpoint={noobsdim}"),
+        "{noobsdim}: policy.config builds no flownav policy (DeterministicPolicy.__init__() missing 1 required positional argument: 'obs_dim'); the file is corrupt or was edited; use the run's last.pt or best.pt, or a file written by flownav",
+    ),
+    (
+        "edited_weights",
+        train_case("algo.init_from={noweight}", "algo.total_frames=1"),
+        "{noweight}: policy.state_dict lacks ['normalizer.mean'] for its policy.config; the file is corrupt or was edited; use the run's last.pt or best.pt, or a file written by flownav",
+    ),
+    (
+        "not_a_checkpoint",
+        evaluate_case("checkpoint={garbage}"),
+        "cannot read checkpoint {garbage}: it is truncated, corrupt or not a torch file (nothing a weights-only load can read); use a checkpoint written by flownav (a run's checkpoints/last.pt or best.pt)",
+    ),
+    (
+        "truncated_checkpoint",
+        evaluate_case("checkpoint={truncated}"),
+        "cannot read checkpoint {truncated}: it is truncated, corrupt or not a torch file (PytorchStreamReader failed reading zip archive: failed finding central directory); use a checkpoint written by flownav (a run's checkpoints/last.pt or best.pt)",
+    ),
+    # a malicious pickle behind every loader: teacher, init_from, resume (PPO; DAgger, whose buffer is in
+    # last.pt), the CFD run state, the exporter
+    ("malicious_teacher", dagger_case("teacher_checkpoint={evil}"), EVIL),
+    ("malicious_init_from", train_case("algo.init_from={evil}"), EVIL),
+    ("malicious_resume_ppo", train_case("resume={evil_run}"), EVIL_RUN),
+    ("malicious_resume_dagger", dagger_case("resume={evil_run}"), EVIL_RUN),
+    (
+        "malicious_cfd_state",
+        cfd_case(*TINY_CFD, "--run-dir", "{evil_cfd}"),
+        EVIL.replace("{evil}", "{evil_cfd}/state.pt"),
+    ),
+    ("malicious_export", export_case("checkpoint={evil}"), EVIL),
+    (
+        "export_format",
+        export_case("checkpoint=checkpoints/student.pt", "format=pdf"),
+        "format=pdf: choose one of onnx, torchscript",
     ),
     # datasets
     ("sha256_type", data_case("sha"), SHA + ": sha256 must be a group of keys (['velocity.npy']); got 'abc'"),
@@ -268,6 +295,32 @@ def test_bad_input_gives_one_line_naming_the_key(case, expected, files, tmp_path
     assert not files["marker"].exists()  # nothing ran from a checkpoint
 
 
+CFD = "python -m flownav.cfd"
+
+
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (
+            ["generate", "--warmup", "abc"],
+            f"{CFD} generate: argument --warmup: invalid float value: 'abc'; see {CFD} generate --help",
+        ),
+        (
+            ["generat"],
+            f"{CFD}: argument cmd: invalid choice: 'generat' (choose from 'generate', 'validate', 'plot'); "
+            f"see {CFD} --help",
+        ),
+    ],
+    ids=["not_a_number", "unknown_command"],
+)
+def test_cfd_argument_errors_are_one_line(argv, expected, capsys):
+    from flownav.cfd.__main__ import parser
+
+    with pytest.raises(SystemExit) as stop:
+        parser().parse_args(argv)
+    assert stop.value.code == 2 and capsys.readouterr().err == f"error: {expected}\n"
+
+
 def _entry_point(args, **env):
     return subprocess.run(
         [sys.executable, *args],
@@ -297,7 +350,7 @@ def _entry_point(args, **env):
             "warmup (--warmup) must be a positive number of D/U, got -1.0",
         ),
     ],
-    ids=["train_fraction", "train_nan", "evaluate_malicious", "cfd_negative"],
+    ids=["train_fraction", "train_nan", "evaluate_malicious", "cfd_negative"],  # the exporter: the census test
 )
 def test_entry_points_print_one_line_and_exit_2(args, expected, files, tmp_path):
     args = [a.format(**files) for a in args]
@@ -308,6 +361,16 @@ def test_entry_points_print_one_line_and_exit_2(args, expected, files, tmp_path)
     assert out.stderr.strip().splitlines()[-1] == "error: " + expected.format(**files)
     assert "Traceback" not in out.stderr
     assert not files["marker"].exists()
+
+
+@pytest.mark.slow
+def test_census_script_counts_its_cases():
+    """The census runs (one of its cases here, the exporter given a malicious checkpoint, through its entry point;
+    all of them: python scripts/bad_input_census.py)."""
+    assert len(census.CASES) >= 45 and len({c[0] for c in census.CASES}) == len(census.CASES)
+    out = _entry_point(["scripts/bad_input_census.py", "-k", "export_evil"])
+    assert out.returncode == 0, out.stdout + out.stderr[-2000:]
+    assert "1 cases tried, 1 give a one-line error" in out.stdout and "shipped files changed: 0" in out.stdout
 
 
 @pytest.mark.slow

@@ -280,5 +280,31 @@ def test_interrupted_generate_resumes_to_the_identical_dataset(tmp_path, monkeyp
     for name in ("velocity.npy", "history.npz"):
         assert (tmp_path / "out" / name).read_bytes() == (tmp_path / "whole" / "dataset" / name).read_bytes(), name
     assert resumed == diag
+    # The final lattice state too: the populations and the step count, bit for bit.
+    from flownav.cfd.runner import NUMPY_ARRAY_GLOBALS
+    from flownav.checkpoint import safe_torch_load
+
+    whole, cut = (safe_torch_load(tmp_path / d / "state.pt", NUMPY_ARRAY_GLOBALS)["sim"] for d in ("whole", "cut"))
+    diff = float((whole["f"].double() - cut["f"].double()).abs().max())
+    print(f"\nCFD resume: max |difference| of the final populations = {diff}")  # pytest -s
+    assert whole["steps"] == cut["steps"] and diff == 0.0
     # Re = 100 on 4 cells per D is no Re = 300 wake: the generator's closing warning names it.
     assert "WARNING: this wake is OUTSIDE" in tolerance_warning(check_wake_3d(diag), re=100)
+
+
+def test_a_run_directory_of_another_set_up_is_refused_and_left_as_it_was(tmp_path):
+    from flownav.cfd.dataset import GenerateConfig, generate
+    from flownav.cfd.runner import run as run_lbm
+    from flownav.cfd.runner import save_checkpoint
+    from flownav.errors import CheckpointError
+
+    other = CylinderLBM(SimConfig(re=100, cells_per_d=4, u_lattice=0.15, x_range=(-5, 27), y_half=7.5, span=2.0))
+    save_checkpoint(tmp_path / "state.pt", other, run_lbm(other, 0.0, None))
+    (tmp_path / "config.json").write_text("the other run's settings")
+    before = (tmp_path / "state.pt").read_bytes()
+    sim = SimConfig(re=100, cells_per_d=4, u_lattice=0.15, x_range=(-5, 26), y_half=7.5, span=2.0)
+    cfg = GenerateConfig(sim=sim, warmup=12.0, record=14.0, frame_dt=0.45, out_spacing=0.5, min_periods=1)
+    with pytest.raises(CheckpointError, match=r"another set-up \(x_range \[-5, 27\] there, \[-5, 26\] here\)"):
+        generate(cfg, None, tmp_path)
+    assert (tmp_path / "config.json").read_text() == "the other run's settings"
+    assert (tmp_path / "state.pt").read_bytes() == before and not (tmp_path / "dataset").exists()

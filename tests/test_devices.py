@@ -73,6 +73,51 @@ def test_ppo_puts_networks_buffer_returns_and_eval_envs_on_cfg_device(monkeypatc
     check_on_device(device, **things)  # the real check passes on what PPO built
 
 
+def test_dagger_puts_student_teacher_buffer_and_eval_envs_on_cfg_device(monkeypatch, tmp_path):
+    """What DAgger builds (checked by the trainer itself), its aggregated buffer and every env it builds, the
+    final evaluation's included, is on cfg.device."""
+    from tiny import DRIFT_TASK
+
+    from flownav import builders
+    from flownav.algorithms import dagger
+    from flownav.checkpoint import save_policy_checkpoint
+    from flownav.evaluation.scripted import HeadToTarget, fit_expert
+
+    teacher, _ = fit_expert(HeadToTarget(), hidden=(16,), steps=50, batch=256, seed=0)
+    save_policy_checkpoint(tmp_path / "teacher.pt", teacher, "geo", "teacher")
+    built, checked, storages = [], [], []
+    real_build_env, real_storage = builders.build_env, dagger.LazyTensorStorage
+
+    def recording_build_env(*args, **kwargs):
+        built.append(real_build_env(*args, **kwargs))
+        return built[-1]
+
+    def recording_storage(*args, **kwargs):
+        storages.append(kwargs.get("device"))
+        return real_storage(*args, **kwargs)
+
+    monkeypatch.setattr(dagger, "build_env", recording_build_env)  # the training env
+    monkeypatch.setattr(builders, "build_env", recording_build_env)  # the evaluation envs (protocol.EvalSpec)
+    monkeypatch.setattr(dagger, "LazyTensorStorage", recording_storage)
+    monkeypatch.setattr(dagger, "check_on_device", lambda device, **things: checked.append((device, things)))
+    from train import run
+
+    cfg = compose_train(
+        "+experiment=student",
+        *DRIFT_TASK,
+        f"teacher_checkpoint={tmp_path / 'teacher.pt'}",
+        *["algo.iterations=1", "algo.num_envs=8", "algo.steps_per_iteration=5", "algo.updates_per_iteration=2"],
+        *["algo.batch_size=16", "algo.hidden=[8]", "algo.final_eval_episodes=8"],
+        *["logger=csv", "logger.progress=false", "threads=1"],
+    )
+    run(cfg, tmp_path / "run")
+    assert len(built) >= 2  # training env, final evaluation
+    assert {str(env.device) for env in built} == {"cpu"} and [str(d) for d in storages] == ["cpu"]
+    ((device, things),) = checked
+    assert str(device) == "cpu" and set(things) == {"student", "teacher", "env"}
+    check_on_device(device, **things)  # the real check passes on what DAgger built
+
+
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
 def test_tiny_ppo_trains_on_cuda(tmp_path):
     from flownav.checkpoint import load_checkpoint

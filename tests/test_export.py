@@ -81,22 +81,24 @@ def test_card_says_unknown_for_an_unevaluated_checkpoint(tmp_path):
     [
         (
             ["checkpoint=checkpoints/student.pt", "format=tflite"],
-            "flownav.export: format=tflite: choose one of onnx, torchscript\n",
+            "error: format=tflite: choose one of onnx, torchscript\n",
         ),
         (
             ["checkpoint=checkpoints/nope.pt"],
-            f"flownav.export: no checkpoint at {CHECKPOINT_DIR / 'nope.pt'}: train one "
+            f"error: no checkpoint at {CHECKPOINT_DIR / 'nope.pt'}: train one "
             "(python train.py +experiment=teacher) or fix the path\n",
         ),
-        (["format=onnx"], "flownav.export: checkpoint= is required, e.g. checkpoint=checkpoints/student.pt\n"),
+        (["format=onnx"], "error: checkpoint= is required, e.g. checkpoint=checkpoints/student.pt\n"),
         (
             ["checkpoint=checkpoints/student.pt", "fmt=onnx"],
-            "flownav.export: unknown argument 'fmt=onnx'; use key=value with keys checkpoint, format, out\n",
+            "error: unknown argument 'fmt=onnx'; use key=value with keys checkpoint, format, out\n",
         ),
     ],
 )
 def test_bad_arguments_one_line(argv, message, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # nothing may be written, anywhere
-    assert main(argv) == 2
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)
+    assert exit_.value.code == 2
     assert capsys.readouterr().err == message
     assert list(tmp_path.iterdir()) == []

@@ -3,6 +3,7 @@ resumes bit for bit; quick tries and refused resumes leave shipped files and oth
 
 from __future__ import annotations
 
+import argparse
 import csv
 import hashlib
 import math
@@ -11,6 +12,7 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from unittest import mock
 
 import pytest
 import torch
@@ -155,6 +157,23 @@ def test_ppo_stops_on_a_non_finite_optimiser_setting(tmp_path, monkeypatch):
     assert not (tmp_path / "checkpoints" / "last.pt").exists()
 
 
+def test_ppo_stops_on_a_non_finite_update_and_keeps_the_last_finite_checkpoint(tmp_path, monkeypatch):
+    import train
+    from flownav.algorithms import ppo
+
+    train.run(compose_train(*PPO_TINY, "algo.total_frames=4096"), tmp_path)  # 2 iterations of 128 x 16
+    last = tmp_path / "checkpoints" / "last.pt"
+    before = last.read_bytes()
+    bypass_validation(monkeypatch, ppo)
+    cfg = compose_train(*PPO_TINY, "algo.total_frames=8192", "algo.lr=inf", f"resume={tmp_path}")
+    with pytest.raises(
+        NonFiniteError, match=rf"PPO iteration 3: .*\(the last finite checkpoint is {re.escape(str(last))}\)"
+    ):
+        ppo.train(cfg, tmp_path)
+    assert last.read_bytes() == before  # iteration 2, finite
+    assert load_checkpoint(last)["train_state"]["iteration"] == 2
+
+
 def test_dagger_stops_on_grad_clip_nan_and_keeps_the_last_finite_checkpoint(teacher_ckpt, tmp_path, monkeypatch):
     import train
     from flownav.algorithms import dagger
@@ -181,6 +200,14 @@ def test_a_non_finite_checkpoint_is_never_written(tmp_path):
     with pytest.raises(NonFiniteError, match=r"refusing to write .*x\.pt: policy\.state_dict\.net\.0\.weight"):
         save_policy_checkpoint(tmp_path / "x.pt", policy, "geo", "teacher")
     assert not any(tmp_path.iterdir())
+    # A non-finite file made some other way is never shipped (copied to checkpoints/) either.
+    from flownav.checkpoint import FORMAT, ship_checkpoint
+
+    payload = {"format": FORMAT, "obs": "geo", "role": "teacher", "meta": {}, "train_state": {"frames": 1}}
+    torch.save(payload | {"policy": {"config": policy.config, "state_dict": policy.state_dict()}}, tmp_path / "nan.pt")
+    with pytest.raises(NonFiniteError, match=r"refusing to write .*shipped\.pt: policy\.state_dict\.net\.0\.weight"):
+        ship_checkpoint(tmp_path / "nan.pt", tmp_path / "shipped.pt")
+    assert not (tmp_path / "shipped.pt").exists()
 
 
 # ----------------------------------------------------------------------------- exact resume
@@ -225,6 +252,7 @@ def test_ppo_resumes_bit_for_bit_after_a_failure(tmp_path, monkeypatch):
     assert load_checkpoint(tmp_path / "part" / "checkpoints" / "last.pt")["train_state"]["iteration"] == 2
     train.run(compose_train(*PPO_TINY, budget, f"resume={tmp_path / 'part'}"), tmp_path / "unused")
     a, b = tmp_path / "straight" / "checkpoints" / "last.pt", tmp_path / "part" / "checkpoints" / "last.pt"
+    print(f"\nPPO resume: max |difference| of the final weights = {max_weight_difference(a, b)}")  # pytest -s
     assert max_weight_difference(a, b) == 0.0
     ca, cb = (load_checkpoint(p)["train_state"]["critic"] for p in (a, b))
     assert all(torch.equal(ca[k], cb[k]) for k in ca)
@@ -247,6 +275,7 @@ def test_dagger_resumes_bit_for_bit_after_a_failure(teacher_ckpt, tmp_path, monk
     assert part["iteration"] == 3 and len(part["buffer"]["obs"]) == 1500  # one file, the filled part
     train.run(dagger_cfg(teacher_ckpt, "algo.iterations=5", f"resume={tmp_path / 'part'}"), tmp_path / "unused")
     a, b = tmp_path / "straight" / "checkpoints" / "last.pt", tmp_path / "part" / "checkpoints" / "last.pt"
+    print(f"\nDAgger resume: max |difference| of the final weights = {max_weight_difference(a, b)}")  # pytest -s
     assert max_weight_difference(a, b) == 0.0
     assert not list((tmp_path / "part" / "checkpoints").glob("buffer*"))
 
@@ -324,6 +353,30 @@ def test_shipping_a_partial_run_is_refused_before_anything_is_written(tmp_path):
     assert tree_digest(*SHIPPED) == before
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (
+            ["suite.training.episodes=50"],
+            "error: suite.training.episodes=50 changes an experiment's episode count: only the counts in ",
+        ),
+        (["seed=0,1"], "error: a -m sweep writing results/paper.json: its jobs would race for one file; "),
+    ],
+    ids=["episodes_override", "sweep"],
+)
+def test_shipping_an_evaluation_is_refused_for_changed_counts_and_in_a_sweep(args, message, tmp_path):
+    """ship=true writes REPORT.md and results/ only with the experiments' own episode counts, from one run."""
+    before = tree_digest(*SHIPPED)
+    sweep = any("," in a for a in args)
+    cmd = [sys.executable, "evaluate.py", *(["-m"] if sweep else []), "+experiment=paper_training", "ship=true", *args]
+    cmd.append(f"hydra.{'sweep' if sweep else 'run'}.dir={tmp_path}")
+    out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert out.stderr.strip().splitlines()[-1].startswith(message)
+    assert tree_digest(*SHIPPED) == before
+
+
 def test_ship_copies_a_finished_run_without_its_resume_state(tmp_path, monkeypatch):
     """ship=true at the experiment's budget (shrunk here) copies the policy (no env state, no buffer) and record."""
     import train
@@ -363,3 +416,50 @@ def test_resume_accepts_only_a_run_directory_and_writes_nothing_before_its_check
         train.run(compose_train(*STUDENT_SMOKE, f"resume={policy_file}"), tmp_path / "run")
     assert sorted(p.name for p in fake.rglob("*")) == ["checkpoints", "config.yaml", "last.pt"]
     assert not (tmp_path / "run").exists() and tree_digest(*SHIPPED) == before
+
+
+class _Parsed(Exception):
+    """Raised instead of parsing: carries the command line's parser."""
+
+    def __init__(self, parser):
+        self.parser = parser
+
+
+def parser_of(main) -> argparse.ArgumentParser:
+    """The argparse parser a command's ``main`` builds (stopped before it parses anything)."""
+
+    def stop(self, *args, **kwargs):
+        raise _Parsed(self)
+
+    with mock.patch.object(argparse.ArgumentParser, "parse_known_args", stop), pytest.raises(_Parsed) as e:
+        main([])
+    return e.value.parser
+
+
+def path_defaults(parser, prefix=""):
+    """(option, default) of every path-like option of a parser and its sub-commands."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from path_defaults(sub, f"{prefix}{name} ")
+        elif any(w in action.dest for w in ("out", "json", "dir", "ship")) and isinstance(action.default, str | Path):
+            yield f"{prefix}{action.option_strings[0] if action.option_strings else action.dest}", action.default
+
+
+def test_no_command_line_default_writes_into_a_shipped_place():
+    """Every output a command writes by default lies outside checkpoints/, results/, data/ and REPORT.md (and the
+    README's figures, docs/figures); the shipped places are written only when an option names them."""
+    from flownav.cfd import __main__ as cfd
+    from flownav.evaluation import selection
+    from flownav.shipping import is_shipped
+    from flownav.viz import interactive, plots
+
+    defaults = [
+        d for main in (cfd.main, interactive.main, plots.main, selection.main) for d in path_defaults(parser_of(main))
+    ]
+    assert {"generate --run-dir", "plot --out-dir", "--out"} <= {name for name, _ in defaults}
+    shipped = [(name, str(v)) for name, v in defaults if is_shipped(v) or Path(v).parts[:2] == ("docs", "figures")]
+    assert shipped == []
+    from flownav.export import parse_arguments
+
+    assert parse_arguments(["checkpoint=checkpoints/student.pt"])["out"] is None  # -> exports/<name>.onnx

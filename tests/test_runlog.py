@@ -74,6 +74,45 @@ def test_tiny_ppo_run_logs_dashboard_keys_figure_and_summary(tmp_path):
     assert summary[-1] == f"best: {tmp_path / 'checkpoints' / 'best.pt'}"
 
 
+def test_tiny_dagger_run_logs_episode_outcomes_loss_buffer_and_summary(tmp_path):
+    """DAgger's rows: the collected episodes' outcomes (the causes add up to 1 with the successes), eq. 9's loss,
+    beta and the buffer's size; train.log ends with the student's and the teacher's held-out success."""
+    from tiny import DRIFT_TASK
+
+    from flownav.checkpoint import save_policy_checkpoint
+    from flownav.evaluation.scripted import HeadToTarget, fit_expert
+    from train import run
+
+    teacher, _ = fit_expert(HeadToTarget(), hidden=(16,), steps=100, batch=256, seed=0)
+    save_policy_checkpoint(tmp_path / "teacher.pt", teacher, "geo", "teacher")
+    cfg = compose_train(
+        "+experiment=student",
+        *DRIFT_TASK,
+        "env.time_limit=4.0",  # episodes end within each iteration's 25 steps of 0.2
+        f"teacher_checkpoint={tmp_path / 'teacher.pt'}",
+        *["algo.iterations=2", "algo.num_envs=16", "algo.steps_per_iteration=25", "algo.updates_per_iteration=2"],
+        *["algo.batch_size=32", "algo.hidden=[8]", "algo.final_eval_episodes=20"],
+        *["logger=csv", "logger.progress=false", "threads=1"],
+    )
+    run_dir = tmp_path / "run"
+    final = run(cfg, run_dir)
+    rows = [r for r in csv.DictReader(open(run_dir / "metrics.csv", newline="")) if r.get("train/loss")]
+    assert len(rows) == 2
+    for r in rows:
+        rates = [float(r[f"train/rate_{c}"]) for c in ("left_domain", "hit_obstacle", "timeout")]
+        assert sum(rates) + float(r["train/success_rate"]) == pytest.approx(1.0)
+        assert 0 < float(r["train/episode_length"]) <= 4.0 and float(r["train/episodes"]) > 0
+        assert all(math.isfinite(float(r[k])) for k in ("train/loss", "train/loss_onpolicy", "train/beta"))
+    assert [int(float(r["buffer/size"])) for r in rows] == [400, 800]
+    log = (run_dir / "train.log").read_text().strip().splitlines()
+    summary = log[log.index("== run summary ==") :]
+    assert summary[1] == "steps: 800"
+    for line, name in zip(summary[3:5], ("student", "teacher"), strict=True):
+        rate = final[f"eval/{name}_success_rate"]
+        assert line.startswith(f"held-out {name} success: {rate:.2%} of 20 held-out episodes (95% CI ")
+    assert summary[-1] == f"last: {run_dir / 'checkpoints' / 'last.pt'}"
+
+
 def test_run_summary_wilson_interval_and_unevaluated():
     text = run_summary(1000, 90.0, {"student": (0.0, 100), "teacher": (None, 0)}, {"last": Path("/r/last.pt")})
     assert text.splitlines() == [

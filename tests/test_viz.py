@@ -5,6 +5,7 @@ import json
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -121,6 +122,19 @@ def test_movie_is_an_mp4_with_the_episode_frames(tmp_path):
     assert frames.std() > 10  # a picture, not a blank frame
 
 
+def test_render_script_without_chromium_stops_with_one_line(tmp_path, monkeypatch):
+    """No Chromium on the machine: one line naming what to install, no traceback, no file."""
+    sys.path.insert(0, str(REPO_ROOT / "scripts"))
+    import render_html
+
+    monkeypatch.setattr(render_html.shutil, "which", lambda name: None)
+    with pytest.raises(SystemExit) as stop:
+        render_html.main([str(tmp_path / "page.html"), str(tmp_path / "page.png")])
+    message = str(stop.value.code)
+    assert message.startswith("no Chromium found (tried chromium, ") and message.endswith("apt-get install -y chromium")
+    assert "\n" not in message and not (tmp_path / "page.png").exists()
+
+
 @pytest.mark.slow
 def test_render_script_writes_a_png_when_chromium_is_present(tmp_path):
     pytest.importorskip("plotly")
@@ -154,3 +168,58 @@ def test_command_line_writes_the_page_of_each_checkpoint(tmp_path):
     assert all(n.endswith("(timeout)") for n in names)  # Region 2 is >= 3.7 D away in y: not in 2 time units
     assert not any(t["name"] == "obstacle" for t in traces)  # the uniform flow has no cylinder
     assert "student, teacher in uniform" in layout["title"]["text"]
+
+
+@pytest.fixture
+def saved_figures(monkeypatch):
+    """The matplotlib figures the plotting functions save (they close them after saving)."""
+    from matplotlib.figure import Figure
+
+    saved, save = [], Figure.savefig
+
+    def keep(self, *args, **kwargs):
+        saved.append(self)
+        return save(self, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    return saved
+
+
+def test_trajectory_figure_labels_units_colorbar_legend_and_equal_panels(tmp_path, saved_figures):
+    from flownav.viz.fields import VORTICITY_LABEL
+    from flownav.viz.trajectories import plot_trajectories_3d
+
+    runs = {name: {**traj, "t0": torch.tensor([1.5])} for name, traj in RUNS.items()}
+    plot_trajectories_3d(runs, FLOW, tmp_path / "traj.png", title="two policies")
+    (fig,) = saved_figures
+    ax3d, ax2d, cbar = fig.axes
+    assert (ax3d.get_xlabel(), ax3d.get_ylabel(), ax3d.get_zlabel()) == ("x / D", "y / D", "z / D")
+    assert (ax2d.get_xlabel(), ax2d.get_ylabel()) == ("x / D", "y / D")
+    assert cbar.get_ylabel() == VORTICITY_LABEL and "t = 1.5 D/U" in ax2d.get_title()
+    labels = [t.get_text() for legend in fig.legends for t in legend.get_texts()]
+    assert labels == ["teacher (success)", "student (left_domain)", "reached the target", "failed", "start", "target"]
+    lines = {line.get_label(): line for line in ax3d.get_lines() if not line.get_label().startswith("_")}
+    teacher, student = lines["teacher (success)"], lines["student (left_domain)"]
+    assert teacher.get_linestyle() == "-" and student.get_linestyle() == "--"
+    assert teacher.get_marker() != student.get_marker() and teacher.get_zorder() != student.get_zorder()
+    assert teacher.get_linewidth() > student.get_linewidth()  # the first drawn below, wider: both stay visible
+    w3, w2 = (ax.get_position(original=True).width for ax in (ax3d, ax2d))
+    assert w3 == pytest.approx(w2, rel=1e-6)  # panels of equal size (the x-y one keeps its aspect inside)
+
+
+def test_success_maps_come_in_a_grid_with_labelled_axes_and_colorbars(tmp_path, saved_figures):
+    from flownav.viz.maps import plot_success_maps
+
+    rng = np.random.default_rng(0)
+    episodes = np.full((6, 4, 2), 10)
+    maps = {f"policy{k}": {"episodes": episodes, "successes": rng.integers(0, 11, (6, 4, 2))} for k in range(5)}
+    files = plot_success_maps(maps, FLOW, np.array([5.0, -1.0, 2.0]), tmp_path / "maps", title="maps")
+    assert len(files) == 1 + 5 and all(Path(f).is_file() for f in files)
+    fig = saved_figures[0]
+    panels = [ax for ax in fig.axes if ax.get_label() != "<colorbar>"]
+    colorbars = [ax for ax in fig.axes if ax.get_label() == "<colorbar>"]
+    assert len(panels) == 6 and len(colorbars) == 2  # 5 maps in 2 rows of 3 (one empty), not a row of 5
+    assert fig.get_size_inches()[0] < 16
+    assert (fig._supxlabel.get_text(), fig._supylabel.get_text()) == ("x / D", "y / D")
+    bars = {cb.get_ylabel().split(" at ")[0] for cb in colorbars}
+    assert bars == {"success rate (pooled over z)", r"$\omega_z D / U$"}

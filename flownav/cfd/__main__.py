@@ -3,7 +3,8 @@
 generate  run the 3D Re = 300 wake (resumes from --run-dir) and write the dataset to --out
           (default <run-dir>/dataset; the shipped data/cylinder_re300 only when --out names it)
 validate  2D Re = 100 check against the literature + a 3D dataset's diagnostics
-plot      z-vorticity slice and Q-criterion view of a wake dataset -> docs/figures/
+plot      z-vorticity slice and Q-criterion view of a wake dataset -> --out-dir
+          (default runs/cfd/figures; the README's figures only when --out-dir names docs/figures)
 
 Lengths are in cylinder diameters D, velocities in the inflow speed U, times in D/U.
 Set FLOWNAV_DEBUG=1 to see the traceback of an error.
@@ -29,6 +30,14 @@ class _Help(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpF
     """Keep the description's layout and append every option's default."""
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors as the other entry points give them: one line ``error: ...``, exit status 2."""
+
+    def error(self, message: str):
+        print(f"error: {self.prog}: {message}; see {self.prog} --help", file=sys.stderr, flush=True)
+        raise SystemExit(2)
+
+
 def _sim_args(p: argparse.ArgumentParser, defaults: SimConfig) -> None:
     p.add_argument("--re", type=float, default=defaults.re, help="Reynolds number U D / nu")
     p.add_argument("--cells-per-d", type=int, default=defaults.cells_per_d, help="lattice cells per diameter D")
@@ -46,7 +55,7 @@ def _sim_args(p: argparse.ArgumentParser, defaults: SimConfig) -> None:
 
 
 def parser() -> argparse.ArgumentParser:
-    top = argparse.ArgumentParser(prog="python -m flownav.cfd", description=__doc__, formatter_class=_Help)
+    top = _Parser(prog="python -m flownav.cfd", description=__doc__, formatter_class=_Help)
     top.add_argument("--threads", type=int, default=2, help="torch / OpenMP threads")
     top.add_argument("--device", default="cpu", help="torch device (cpu runs the C kernel)")
     sub = top.add_subparsers(dest="cmd", required=True)
@@ -90,7 +99,12 @@ def parser() -> argparse.ArgumentParser:
 
     plot = sub.add_parser("plot", help="wake figures", formatter_class=_Help)
     plot.add_argument("--dataset", type=Path, default=SHIPPED_DATASET, help="wake dataset to draw")
-    plot.add_argument("--out-dir", type=Path, default=Path("docs/figures"), help="where wake_*.png go")
+    plot.add_argument(
+        "--out-dir",
+        type=Path,
+        default=Path("runs/cfd/figures"),
+        help="where wake_*.png go (the README's figures: --out-dir docs/figures)",
+    )
     plot.add_argument("--frame", type=int, default=0, help="frame index")
     return top
 

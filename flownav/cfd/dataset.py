@@ -114,7 +114,9 @@ def simulate(
     cfg.check()
     sim = CylinderLBM(cfg.sim, device=device)
     run_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(run_dir / "config.json", json.dumps({"sim": cfg.sim.to_dict(), **_gen_dict(cfg)}, indent=2))
+    config = json.dumps({"sim": cfg.sim.to_dict(), **_gen_dict(cfg)}, indent=2)
+    if not (run_dir / "state.pt").is_file():  # a resume rewrites it only once its state.pt proved to be this set-up
+        atomic_write_text(run_dir / "config.json", config)
     state = run(
         sim,
         cfg.warmup + cfg.record,
@@ -125,6 +127,7 @@ def simulate(
         checkpoint_every_s=checkpoint_every_s,
         desc=f"cylinder Re={cfg.sim.re:g}",
     )
+    (run_dir / "config.json").write_text(config)
     return sim, state
 
 

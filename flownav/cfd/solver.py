@@ -218,10 +218,11 @@ class CylinderLBM:
 
     def load_state_dict(self, state: dict) -> None:
         if state["config"] != self.cfg.to_dict():
+            now, then = self.cfg.to_dict(), state["config"]
+            diff = [f"{k} {then.get(k)} there, {now[k]} here" for k in now if then.get(k) != now[k]]
             raise CheckpointError(
-                "checkpoint was written for another set-up "
-                f"({state['config']} != {self.cfg.to_dict()}); delete the checkpoint directory "
-                "or rerun with the options it was made with"
+                f"checkpoint was written for another set-up ({'; '.join(diff) or state['config']}); use another "
+                "--run-dir, delete that run's state.pt, or rerun with the options it was made with"
             )
         self.f.copy_(state["f"].to(self.device))
         self.steps = int(state["steps"])

@@ -176,7 +176,9 @@ def main(argv=None) -> str:
         epilog="Other arguments are Hydra overrides of conf/config.yaml (flow=..., task=..., env.time_limit=...).",
     )
     p.add_argument("--checkpoint", action="append", required=True, help="a policy checkpoint (repeat for several)")
-    p.add_argument("--out", default="results/html/trajectories.html", help="the HTML file to write")
+    p.add_argument(
+        "--out", default="outputs/html/trajectories.html", help="the HTML file to write (default: %(default)s)"
+    )
     p.add_argument("--episodes", type=int, default=1, help="episodes per policy (same starts and targets)")
     p.add_argument("--seed", type=int, default=0, help="evaluation seed (starts, targets, flow phase)")
     a, overrides = p.parse_known_args(argv)
