@@ -36,16 +36,27 @@ def is_shipped(path) -> bool:
 
 
 def experiment_budget(name: str, algo: str) -> dict:
-    """The budget settings of ``conf/experiment/<name>.yaml`` (its own values over its algo group's)."""
+    """The budget settings of ``conf/experiment/<name>.yaml``: its own values over those of the experiments it
+    builds on (its ``defaults``, in order), over its algo group's."""
+    base = OmegaConf.load(CONF / "algo" / f"{algo}.yaml")
+    own = _experiment_algo(name)
+    return {k: own.get(k, base.get(k)) for k in BUDGET[algo]}
+
+
+def _experiment_algo(name: str) -> dict:
     exp_file = CONF / "experiment" / f"{name}.yaml"
     if not exp_file.is_file():
         raise ConfigError(
             f"ship=true needs a run of an experiment (name={name} has no conf/experiment/{name}.yaml); "
             "run python train.py +experiment=<name> ship=true"
         )
-    base = OmegaConf.load(CONF / "algo" / f"{algo}.yaml")
-    own = OmegaConf.load(exp_file).get("algo") or {}
-    return {k: own.get(k, base.get(k)) for k in BUDGET[algo]}
+    exp = OmegaConf.load(exp_file)
+    algo: dict = {}
+    for parent in exp.get("defaults") or []:
+        if isinstance(parent, str) and parent != "_self_":  # another experiment (groups come as overrides)
+            algo.update(_experiment_algo(parent))
+    algo.update(OmegaConf.to_container(exp.get("algo") or OmegaConf.create({})))
+    return algo
 
 
 def require_full_budget(cfg) -> None:
