@@ -264,3 +264,20 @@ def test_family_benchmark_code_path_runs():
     spec.loader.exec_module(bench)
     step = bench.make_stepper("family_fourier", ("geo_priv", "geo_priv_critic"), 8)
     assert bench.window_rate(step, 8, 0.01) > 0
+
+
+def test_a_periodic_evaluation_figure_of_a_family_draws_the_recorded_paths():
+    """A family has one flow per swimmer, so the training dashboard's figure draws the paths without a field."""
+    from flownav.evaluation.protocol import EvalSpec, evaluate
+    from flownav.evaluation.scripted import HeadToTarget
+    from flownav.viz.dashboard import eval_trajectories_figure
+
+    flow = build_flow(OmegaConf.create({"type": "family", "members": {"c": {"type": "uniform", "speed": [0.0, 0.5]}}}))
+    task = FamilyTask(WAKE_BOUNDS, distance=(4.0, 6.0))
+    from flownav.builders import compose_config
+
+    env_cfg = compose_config(["env.time_limit=10.0"]).env
+    ev = evaluate(HeadToTarget(), "geo", EvalSpec(flow, task, env_cfg, 8), record=3)
+    fig = eval_trajectories_figure(ev.episodes.trajectories, flow)
+    paths = [line for line in fig.axes[0].lines if len(line.get_xdata()) > 1]
+    assert len(paths) == 3 and len(fig.axes) == 1  # one path per recorded episode, no colorbar
