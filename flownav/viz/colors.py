@@ -13,6 +13,13 @@ POLICY_COLORS = {
     "teacher_robust": "tab:cyan",
     "student_robust": "tab:purple",
     "student_mem_robust": "tab:brown",
+    "generalist_teacher": "navy",
+    "generalist_student": "teal",
+    "generalist_student_mem": "magenta",
+    "head_to_target": "tab:pink",
+    "passive": "black",
+    "oracle": "tab:olive",
+    "oracle_long": "tab:olive",
 }
 
 

@@ -18,7 +18,7 @@ def plot_sweep(results: dict, xs, out: Path, xlabel: str, title: str = "", keyfn
     """``results[policy][keyfn(x)]`` is a summary; plots success (%) with Wilson 95% error bars."""
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig, ax = plt.subplots(figsize=(5.5, 3.8))
+    fig, ax = plt.subplots(figsize=(7.5, 3.8))
     for i, (name, per) in enumerate(results.items()):
         rates = np.array([100 * per[keyfn(x)]["success_rate"] for x in xs])
         lo = np.array([100 * per[keyfn(x)]["success_ci95"][0] for x in xs])
@@ -31,7 +31,7 @@ def plot_sweep(results: dict, xs, out: Path, xlabel: str, title: str = "", keyfn
     ax.set_ylabel("success rate (%)")
     ax.set_ylim(-2, 102)
     ax.grid(alpha=0.3)
-    ax.legend()
+    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5))  # outside: the curves stay visible
     ax.set_title("\n".join(textwrap.wrap(title, 60)), fontsize=9)
     fig.tight_layout()
     fig.savefig(out, dpi=120)
