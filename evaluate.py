@@ -3,6 +3,7 @@
     python evaluate.py checkpoint=checkpoints/student.pt                          # training flow, 10,000 episodes
     python evaluate.py checkpoint=checkpoints/teacher.pt env.misalignment_deg=90  # a misaligned wake
     python evaluate.py checkpoint=checkpoints/student.pt flow=abc task=abc env.swim_speed_scale=0.1
+    python evaluate.py checkpoint=scripted:head_to_target flow=uniform  # a scripted reference, same episodes
     python evaluate.py +experiment=paper ship=true       # the whole paper -> REPORT.md, results/paper.json
     python evaluate.py +experiment=paper_misalignment ship=true    # one experiment (merged into the report)
     python evaluate.py +experiment=paper flow=vortex_street max_episodes=500      # a quick dry run (run dir only)
@@ -35,6 +36,7 @@ from flownav.builders import build_flow, build_task
 from flownav.checkpoint import load_policy
 from flownav.errors import ConfigError, reported_as_one_line
 from flownav.evaluation.protocol import EvalSpec, evaluate
+from flownav.evaluation.scripted import SCRIPTED
 from flownav.evaluation.tables import log_line
 from flownav.paths import REPO_ROOT, resolve
 from flownav.shipping import is_shipped
@@ -52,9 +54,20 @@ def eval_spec(cfg: DictConfig) -> EvalSpec:
     return EvalSpec(flow, task, cfg.env, int(cfg.episodes), int(cfg.seed), int(cfg.chunk_size), str(cfg.device))
 
 
+def load_evaluated(checkpoint: str, cfg: DictConfig):
+    """(policy, payload) of a checkpoint file, or of a scripted reference named ``scripted:<name>``
+    (head_to_target, passive, oracle: flownav/evaluation/scripted.py), which reads the geo view."""
+    if not checkpoint.startswith("scripted:"):
+        return load_policy(resolve(checkpoint), expect_obs=cfg.get("expect_obs"), device=cfg.device)
+    kind = checkpoint.split(":", 1)[1]
+    if kind not in SCRIPTED:
+        raise ConfigError(f"checkpoint={checkpoint} names no scripted policy; choose scripted:<{'|'.join(SCRIPTED)}>")
+    return SCRIPTED[kind](), {"obs": "geo", "role": "reference"}
+
+
 def evaluate_checkpoint(cfg: DictConfig, log=print) -> dict:
     """Evaluate ``cfg.checkpoint`` on ``cfg.flow`` / ``cfg.task`` / ``cfg.env`` for ``cfg.episodes`` episodes."""
-    policy, payload = load_policy(resolve(str(cfg.checkpoint)), expect_obs=cfg.get("expect_obs"), device=cfg.device)
+    policy, payload = load_evaluated(str(cfg.checkpoint), cfg)
     obs = payload["obs"]
     t0 = time.time()
     out = evaluate(policy, obs, eval_spec(cfg), progress=bool(cfg.progress)).summary

@@ -1,4 +1,5 @@
-"""Try every bad input that issue 13 lists through the entry points a user types, and count the clear errors.
+"""Try every class of bad input docs/guarantees.md names through the entry points a user types, and count the clear
+errors.
 
     python scripts/bad_input_census.py              # every case, a table and "N cases tried, M give a one-line error"
     python scripts/bad_input_census.py -k export    # only the cases whose id contains "export"
@@ -38,12 +39,12 @@ TINY_CFD += "--warmup 12 --record 14 --frame-dt 0.45 --out-spacing 0.5".split()
 
 # (id, argv after the python executable, words the error line must contain). {name} is a file of make_files().
 CASES = [
-    # issue 13.1: non-finite settings are refused up front, naming the key
+    # non-finite settings are refused up front, naming the key
     ("train_reward_alpha_nan", [*TRAIN, "env.reward.alpha=nan"], "env.reward.alpha"),
     ("train_success_bonus_inf", [*TRAIN, "env.reward.success_bonus=inf"], "env.reward.success_bonus"),
     ("dagger_grad_clip_nan", [*STUDENT, "algo.grad_clip=nan"], "algo.grad_clip"),
     ("train_lr_inf", [*TRAIN, "algo.lr=inf"], "algo.lr"),
-    # issue 13.2: a malicious pickle behind every loader
+    # a malicious pickle behind every loader
     ("evaluate_evil_checkpoint", [*EVALUATE, "checkpoint={evil}"], "refused to load"),
     ("dagger_evil_teacher", [*STUDENT, "teacher_checkpoint={evil}"], "refused to load"),
     ("train_evil_init_from", [*TRAIN, "algo.init_from={evil}"], "refused to load"),
@@ -51,11 +52,11 @@ CASES = [
     ("dagger_evil_resume", [*STUDENT, "resume={evil_run}"], "refused to load"),
     ("cfd_evil_state", [*CFD, *TINY_CFD, "--run-dir", "{evil_cfd}"], "refused to load"),
     ("export_evil_checkpoint", [*EXPORT, "checkpoint={evil}", "out={tmp}/e.onnx"], "refused to load"),
-    # issue 13.4: resume= takes a run directory only
+    # resume= takes a run directory only
     ("resume_shipped_policy", [*TRAIN, "resume=checkpoints/teacher.pt"], "is not a run directory"),
     ("resume_missing", [*TRAIN, "resume={tmp}/no_such_run"], "no such run directory"),
     ("resume_other_view", [*TRAIN, "obs=ego", "resume={good_run}"], "resume with the same obs"),
-    # issue 13.6: wrong types, silent coercions, zero / infinite values, devices, checkpoints, metadata
+    # wrong types, silent coercions, zero / infinite values, devices, checkpoints, metadata
     ("train_total_frames_abc", [*TRAIN, "algo.total_frames=abc"], "algo.total_frames"),
     ("train_epochs_fraction", [*TRAIN, "algo.epochs=1.5"], "algo.epochs"),
     ("train_entropy_nan", [*TRAIN, "algo.entropy_coeff=nan"], "algo.entropy_coeff"),
@@ -76,7 +77,7 @@ CASES = [
     ("evaluate_dt_string", [*EVALUATE, "flow.path={dt}"], "dt must be"),
     ("evaluate_bounds_without_lo", [*EVALUATE, "flow.path={lo}"], "bounds.lo"),
     ("train_sha256_type", [*TRAIN, "flow.path={sha}"], "sha256"),
-    # issue 13.7: data means what it says; the CFD generator's settings
+    # data means what it says; the CFD generator's settings
     ("evaluate_bounds_beyond_grid", [*EVALUATE, "flow.path={beyond}"], "reach beyond the grid"),
     ("evaluate_shifted_origin", [*EVALUATE, "flow.path={shifted}"], "inside the declared obstacle"),
     ("evaluate_no_dataset", [*EVALUATE, "flow.path={tmp}/nothing"], "{tmp}/nothing"),

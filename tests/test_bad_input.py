@@ -4,7 +4,7 @@
 One parametrised test runs each case in-process and compares the exact message; a few representative
 cases also run the entry points (train.py, evaluate.py, python -m flownav.cfd, python -m flownav.export) in a
 subprocess: exit status 2, the line on stderr, no traceback (unless FLOWNAV_DEBUG=1). The full entry-point
-census of issue 13's list is scripts/bad_input_census.py (it also makes the files the cases here point at).
+census is scripts/bad_input_census.py (it also makes the files the cases here point at).
 """
 
 from __future__ import annotations

@@ -118,3 +118,15 @@ def test_the_selection_command_writes_the_protocol_summary_and_refuses_a_short_s
     with pytest.raises(SystemExit) as stop:  # a shipped checkpoint needs the full 10,000 episodes
         main([*args, "--ship", str(tmp_path / "shipped.pt")])
     assert stop.value.code == 2 and not (tmp_path / "shipped.pt").exists()
+
+
+def test_evaluate_py_runs_a_scripted_reference_through_the_protocol():
+    import evaluate as evaluate_py
+
+    cfg = compose_eval("checkpoint=scripted:head_to_target", f"episodes={EPISODES}", f"env.time_limit={LIMIT}")
+    flow_cfg = compose_config([f"env.time_limit={LIMIT}"])
+    flow = build_flow(flow_cfg.flow)
+    expected = evaluate(HeadToTarget(), "geo", EvalSpec(flow, build_task(flow_cfg.task, flow), flow_cfg.env, EPISODES))
+    assert core(evaluate_py.run(cfg, log=lambda *_: None)) == expected.summary
+    with pytest.raises(evaluate_py.ConfigError, match="names no scripted policy"):
+        evaluate_py.run(compose_eval("checkpoint=scripted:nope", "episodes=4"), log=lambda *_: None)

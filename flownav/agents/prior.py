@@ -31,33 +31,35 @@ def head_to_target(d: Tensor, theta: Tensor, psi: Tensor, u_max: float = 1.0, sp
     Speed: ``u_max * speed_fraction`` times the cosine between heading and target direction (at least 5%):
     slow while facing away, so the swimmer turns on the spot instead of orbiting the target. Every component
     stays inside the action box (0.95 of the turn bounds), so a tanh-squashed output can represent it."""
+    dist = d.norm(dim=-1).clamp_min(1e-6)
     theta_d = torch.atan2(d[..., 1], d[..., 0])
-    psi_d = torch.asin((d[..., 2] / d.norm(dim=-1).clamp_min(1e-6)).clamp(-1, 1))
+    psi_d = torch.asin((d[..., 2] / dist).clamp(-1, 1))
     # f(e) = sin e + (1 - cos e) / 2 is continuous and 2 pi periodic in the heading error e: zero (stable)
     # at e = 0, positive (turn left) when the target is behind, so a small network can fit it.
     err = wrap_angle(theta_d - theta)
     f = torch.sin(err) + 0.5 * (1 - torch.cos(err))
     dtheta = DTHETA_MAX * 0.95 * torch.tanh(3 * f)
     dpsi = DPSI_MAX * 0.95 * torch.tanh(3 * (psi_d - psi))
-    facing = (heading_vector(theta, psi) * d).sum(-1) / d.norm(dim=-1).clamp_min(1e-6)
+    facing = (heading_vector(theta, psi) * d).sum(-1) / dist
     speed = u_max * speed_fraction * facing.clamp(0.05, 1.0)
     return torch.stack((speed, dtheta, dpsi), -1)
 
 
+def check_prior_view(view: str) -> str:
+    if not view.startswith(("ego", "geo")):
+        raise ValueError(f"view {view!r} carries no target direction for the head-to-target prior; use geo or ego")
+    return view
+
+
 def target_and_heading(obs: Tensor, view: str) -> tuple[Tensor, Tensor, Tensor]:
-    """(target direction, theta, psi) read from an observation of ``view``."""
+    """(target direction, theta, psi) read from an observation of a geo or ego ``view``."""
     d = obs[..., :3]
     if view.startswith("ego"):  # body frame: the heading is the x axis
         zero = torch.zeros_like(d[..., 0])
         return d, zero, zero
-    if view == "geo" or view == "geo_flow":  # (d, velocity, theta, psi)
+    if view in ("geo", "geo_flow"):  # (d, velocity, theta, psi)
         return d, obs[..., 6], obs[..., 7]
-    if view.startswith("geo"):  # (d, velocity, cos theta, sin theta, psi, ...)
-        return d, torch.atan2(obs[..., 7], obs[..., 6]), obs[..., 8]
-    raise ValueError(f"view {view!r} carries no target direction for the head-to-target prior; use a geo or ego view")
-
-
-PRIORS = ("head_to_target",)
+    return d, torch.atan2(obs[..., 7], obs[..., 6]), obs[..., 8]  # (d, velocity, cos theta, sin theta, psi, ...)
 
 
 class HeadToTargetPrior(nn.Module):
@@ -66,8 +68,7 @@ class HeadToTargetPrior(nn.Module):
 
     def __init__(self, view: str, low: Sequence[float], high: Sequence[float]):
         super().__init__()
-        target_and_heading(torch.zeros(1, 9), view)  # refuse a view without a target direction now
-        self.view = view
+        self.view = check_prior_view(view)
         # The box is in the policy's config; not persistent, so a checkpoint's state_dict is the weights alone.
         self.register_buffer("low", torch.as_tensor(low, dtype=torch.float32), persistent=False)
         self.register_buffer("high", torch.as_tensor(high, dtype=torch.float32), persistent=False)
