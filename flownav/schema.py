@@ -325,6 +325,7 @@ DAGGER = {
     "hidden": Key(INTS, ge=1),
     "activation": NETWORK["activation"],
     "prior": PRIOR,
+    "scene_expert": Str(null=True),
     "final_eval_episodes": Int(ge=0),
     "results_json": Str(null=True),
 }

@@ -39,6 +39,7 @@ from torchrl.data.replay_buffers.samplers import RandomSampler
 
 from flownav.agents.mixture import TeacherStudentMixture
 from flownav.agents.networks import DeterministicPolicy
+from flownav.agents.scene_router import EXPERT_VIEW, ROUTED_VIEW, scene_routed
 from flownav.algorithms.common import eval_metrics, require_finite_update
 from flownav.atomic import atomic_write_text
 from flownav.builders import build_env, build_flow, build_task
@@ -145,7 +146,18 @@ def train(cfg, run_dir) -> dict:
             f"({', '.join(GEO_VIEWS)}): pass a teacher's checkpoint "
             "(python train.py +experiment=teacher)"
         )
-    teacher_sha = sha256(resolve(str(cfg.teacher_checkpoint)))
+    teacher_meta = {
+        "teacher_checkpoint": str(cfg.teacher_checkpoint),
+        "teacher_sha256": sha256(resolve(str(cfg.teacher_checkpoint))),
+    }
+    if a.get("scene_expert"):  # the paper's teacher acts in the paper's scene (flownav/agents/scene_router.py)
+        expert, _ = load_policy(resolve(str(a.scene_expert)), expect_obs=EXPERT_VIEW, device=device)
+        teacher = scene_routed(teacher, teacher_view, expert, a.scene_expert)
+        teacher_view = ROUTED_VIEW
+        teacher_meta |= {
+            "scene_expert": str(a.scene_expert),
+            "scene_expert_sha256": sha256(resolve(str(a.scene_expert))),
+        }
     flow = build_flow(cfg.flow, device=device)
     task = build_task(cfg.task, flow)
     env = build_env(
@@ -192,7 +204,6 @@ def train(cfg, run_dir) -> dict:
 
     def save(name: str, metrics: dict) -> Path:
         counters = {"iteration": iteration, "frames": frames, "wall_time": logger.elapsed}
-        teacher_meta = {"teacher_checkpoint": str(cfg.teacher_checkpoint), "teacher_sha256": teacher_sha}
         return checkpoints.save(
             name, counters, metrics, meta=teacher_meta, buffer=buffer_contents(buffer), history=history
         )

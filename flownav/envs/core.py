@@ -36,12 +36,15 @@ from flownav.envs.observations import (
     needs_gradient,
     needs_history,
     needs_phase,
+    needs_scene,
     needs_target_flow,
 )
 from flownav.envs.reward import RewardConfig, step_reward
+from flownav.envs.tasks import REGION_2
 from flownav.errors import require_finite
 from flownav.flows.base import FlowField
 from flownav.flows.families import FlowFamily
+from flownav.flows.grid import GridFlow
 from flownav.flows.transforms import RotatedFlow, rotate_z
 
 # Action bounds of the paper (section 2.3.2): U in [0, U_max], dtheta, dpsi in rad per time unit.
@@ -353,6 +356,8 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
             "swim_speed": settings.u_max * state.swim_scale,
             "time_left": 1 - state.steps / settings.max_steps,
         }
+    if needs_scene(views):
+        privileged["paper_scene"] = paper_scene(state, flow, settings).to(state.pos.dtype)
     seen = State(
         to_target=flow.displacement(state.pos, state.target),
         velocity=state.vel,
@@ -365,6 +370,20 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
         **privileged,
     )
     return compute_views(seen, views)
+
+
+def paper_scene(state: Swimmers, flow: FlowField, settings: Settings) -> Tensor:
+    """``[B]`` bool: which swimmers are in the paper's training task as posed: the CFD wake unturned (no
+    misalignment, a family slot drawn without rotation, scaling or background) at strength 1, the swimmer at its
+    full speed, the target in Region 2. What the simulator knows and a scene-routed teacher reads."""
+    slots = torch.arange(state.pos.shape[0], device=state.pos.device)
+    if isinstance(flow, FlowFamily):
+        posed = flow.wake_as_posed(slots)
+    else:  # a misaligned scene is a RotatedFlow, not the dataset's GridFlow
+        posed = torch.full_like(slots, isinstance(flow, GridFlow) and bool(flow.obstacles), dtype=torch.bool)
+    if settings.flow_strength is not None:
+        posed = posed & (state.strength == 1)
+    return posed & (state.swim_scale == 1) & REGION_2.contains(state.target)
 
 
 def flow_history(state: Swimmers) -> Tensor:

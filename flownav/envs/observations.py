@@ -25,6 +25,9 @@
   more look-ups), the swim speed U (the action's full speed times the swimmer's speed factor) and
   log(U / (|u| + 0.05)), the swim-speed ratio against the local flow. A teacher that knows how the
   flow varies around it and how strong it is against the flow can plan; an ego student imitates it.
+* ``geo_priv_scene`` (24, a scene-routed teacher's view): ``geo_priv`` plus 1 where the swimmer is in the
+  paper's training task as posed (the unturned CFD wake at strength 1, full swim speed, the target in Region
+  2), else 0: what a teacher needs to hand those episodes to the paper's teacher (``SceneRoutedTeacher``).
 * ``geo_priv_critic`` (27, its asymmetric critic): ``geo_priv`` plus the fraction of the episode's time
   left (what decides truncation, hence the value) and the flow velocity at the target.
 """
@@ -57,6 +60,7 @@ class State:
     swim_speed: Tensor | None = None  # [N] the swimmer's full swim speed; privileged views only
     time_left: Tensor | None = None  # [N] fraction of the time limit left; privileged views only
     target_flow: Tensor | None = None  # [N, 3] flow velocity at the target; geo_priv_critic only
+    paper_scene: Tensor | None = None  # [N] 1.0 in the paper's training task as posed, else 0; geo_priv_scene only
 
 
 # The memory of ``ego_mem``: HISTORY_LEN flow samples, HISTORY_STRIDE steps apart (newest first). With
@@ -101,6 +105,10 @@ def _geo_priv(s: State) -> Tensor:
     return torch.cat((_geo_sincos(s, s.velocity), *extra), -1)
 
 
+def _geo_priv_scene(s: State) -> Tensor:
+    return torch.cat((_geo_priv(s), s.paper_scene[:, None]), -1)
+
+
 def _geo_priv_critic(s: State) -> Tensor:
     return torch.cat((_geo_priv(s), s.time_left[:, None], s.target_flow), -1)
 
@@ -117,11 +125,13 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "privileged": (14, _privileged),
     "geo_priv": (23, _geo_priv),
     "geo_priv_critic": (27, _geo_priv_critic),
+    "geo_priv_scene": (24, _geo_priv_scene),
 }
 MEMORY_VIEWS = ("ego_mem",)
 PHASE_VIEWS = ("privileged",)
-GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic")  # the flow's gradient, swim speed and time left
+GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic", "geo_priv_scene")  # the flow's gradient, swim speed and time left
 TARGET_FLOW_VIEWS = ("geo_priv_critic",)
+SCENE_VIEWS = ("geo_priv_scene",)
 GEO_VIEWS = tuple(name for name in VIEWS if name.startswith("geo"))  # the teacher's kind: inertial frame
 
 
@@ -143,6 +153,10 @@ def needs_gradient(names) -> bool:
 
 def needs_target_flow(names) -> bool:
     return any(name in TARGET_FLOW_VIEWS for name in names)
+
+
+def needs_scene(names) -> bool:
+    return any(name in SCENE_VIEWS for name in names)
 
 
 def check_views(names) -> tuple[str, ...]:

@@ -121,6 +121,11 @@ class FlowFamily(FlowField):
     def in_obstacle(self, pos: Tensor, idx: Tensor | None = None) -> Tensor:
         return torch.zeros(pos.shape[0], dtype=torch.bool, device=pos.device)
 
+    def wake_as_posed(self, idx: Tensor) -> Tensor:
+        """Which of the slots ``idx`` hold a flow with an obstacle exactly as its dataset poses it (unturned, at
+        strength 1, no background): the paper's scene for the privileged ``geo_priv_scene`` view. None here."""
+        return torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
+
     # ---- what members implement
     def draw(self, n: int, generator: torch.Generator, device) -> dict[str, Tensor]:  # pragma: no cover
         raise NotImplementedError
@@ -278,6 +283,12 @@ class TransformedFamily(FlowFamily):
         u = _rotate(u, p["cos"], p["sin"]) * p["strength"][:, None]
         return u + p["background"].to(pos.dtype)
 
+    def wake_as_posed(self, idx):
+        p = {key: value[idx] for key, value in self.params.items()}
+        solid = torch.tensor([bool(getattr(b, "obstacles", ())) for b in self.bases], device=idx.device)
+        unturned = (p["cos"] == 1) & (p["sin"] == 0)
+        return solid[p["base"]] & unturned & (p["strength"] == 1) & (p["background"] == 0).all(-1)
+
     def in_obstacle(self, pos, idx=None):
         p = self.slot_params(pos, idx)
         q = self._to_base(pos, p)
@@ -326,6 +337,11 @@ class MixtureFamily(FlowFamily):
         member = self.slot_params(pos, idx)["member"]
         hit = torch.zeros(pos.shape[0], dtype=torch.bool, device=pos.device)
         return _route(member, len(self.members), lambda j, r: self.members[j].in_obstacle(pos[r], slots[r]), hit)
+
+    def wake_as_posed(self, idx):
+        member = self.params["member"][idx]
+        posed = torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
+        return _route(member, len(self.members), lambda j, rows: self.members[j].wake_as_posed(idx[rows]), posed)
 
 
 class SumFamily(FlowFamily):
