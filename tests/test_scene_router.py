@@ -1,0 +1,80 @@
+"""The scene-routed teacher of the generalist students: the simulator's paper-scene flag and the routing."""
+
+import pytest
+import torch
+
+from flownav.agents.networks import DeterministicPolicy
+from flownav.agents.scene_router import SceneRoutedTeacher, scene_routed
+from flownav.envs import NavigationEnv
+from flownav.envs.observations import observation_size
+from flownav.envs.tasks import REGION_2, FamilyTask, RegionTask
+from flownav.errors import CheckpointError
+from flownav.flows.base import WAKE_BOUNDS
+from flownav.flows.families import MixtureFamily, TransformedFamily, UniformFamily
+from flownav.flows.synthetic import synthetic_wake
+
+LOW, HIGH = [0.0, -0.785, -1.571], [1.0, 0.785, 1.571]
+
+
+def scene_flags(flow, task=None, n=256, **env_kw):
+    env = NavigationEnv(flow, task or RegionTask(), num_envs=n, views=("geo_priv_scene",), seed=3, **env_kw)
+    obs = env.reset()["geo_priv_scene"]
+    return env, obs[:, -1]
+
+
+def test_paper_scene_is_the_unturned_wake_at_full_strength_and_speed():
+    wake = synthetic_wake()
+    _, flags = scene_flags(wake)
+    assert flags.eq(1).all()  # the paper's task as posed
+    assert scene_flags(wake, misalignment_deg=30.0)[1].eq(0).all()  # a turned scene is another scene
+    assert scene_flags(wake, swim_speed_scale=0.5)[1].eq(0).all()  # a weaker swimmer
+    env, flags = scene_flags(wake, flow_strength=(0.0, 1.0), flow_strength_full=0.5)
+    full = env.state.strength == 1
+    assert 0 < full.sum() < full.numel() and torch.equal(flags.bool(), full)
+
+
+def test_paper_scene_in_a_family_marks_only_the_posed_wake_member_with_the_papers_task():
+    posed = TransformedFamily([synthetic_wake()], angle_deg=(0, 0), strength=(1, 1), background=(0, 0))
+    turned = TransformedFamily([synthetic_wake()], angle_deg=(10, 80), strength=(1, 1), background=(0, 0))
+    flow = MixtureFamily([posed, turned, UniformFamily()], [1.0, 1.0, 1.0], WAKE_BOUNDS)
+    task = FamilyTask(WAKE_BOUNDS, regions_share=0.5, full_speed_share=0.5)
+    env, flags = scene_flags(flow, task, n=2048)
+    member = env.flow.params["member"]
+    expected = (member == 0) & (env.state.swim_scale == 1) & REGION_2.contains(env.state.target)
+    assert 100 < expected.sum() < 2048 and torch.equal(flags.bool(), expected)
+    # geo_priv_scene is geo_priv plus the flag
+    both = NavigationEnv(flow, task, num_envs=64, views=("geo_priv", "geo_priv_scene"), seed=1).reset()
+    assert observation_size("geo_priv_scene") == observation_size("geo_priv") + 1
+    assert torch.equal(both["geo_priv_scene"][:, :-1], both["geo_priv"])
+
+
+class Constant(torch.nn.Module):
+    """A policy that returns one action whatever it reads (and checks how much it reads)."""
+
+    def __init__(self, action, size):
+        super().__init__()
+        self.action, self.size = torch.tensor(action), size
+
+    def forward(self, obs):
+        assert obs.shape[1] == self.size
+        return self.action.expand(obs.shape[0], 3)
+
+
+def test_the_routed_teacher_hands_the_flagged_rows_to_the_expert():
+    teacher = SceneRoutedTeacher(Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9))
+    obs = torch.randn(6, 24)
+    obs[:, -1] = torch.tensor([1.0, 0.0, 1.0, 0.0, 0.0, 1.0])
+    out = teacher(obs)
+    assert torch.equal(out[obs[:, -1] == 1], torch.tensor([[0.9, -0.5, 0.0]]).expand(3, 3))
+    assert torch.equal(out[obs[:, -1] == 0], torch.tensor([[0.1, 0.2, 0.3]]).expand(3, 3))
+
+
+def test_scene_routing_needs_the_generalist_view_and_one_action_box():
+    generalist = DeterministicPolicy(23, LOW, HIGH, hidden=[8])
+    expert = DeterministicPolicy(9, LOW, HIGH, hidden=[8])
+    assert isinstance(scene_routed(generalist, "geo_priv", expert, "teacher.pt"), SceneRoutedTeacher)
+    with pytest.raises(CheckpointError, match="reads 'geo_sincos': pass the generalist teacher"):
+        scene_routed(expert, "geo_sincos", expert, "teacher.pt")
+    other = DeterministicPolicy(9, LOW, [2.0, 0.785, 1.571], hidden=[8])
+    with pytest.raises(CheckpointError, match="another action box"):
+        scene_routed(generalist, "geo_priv", other, "other.pt")
