@@ -256,6 +256,7 @@ TASKS = {
         "distance": Key(FLOATS, size=2, gt=0),
         "margin": Float(ge=0),
         "regions_share": Float(ge=0, le=1),
+        "posed_wake_regions_share": Float(ge=0, le=1, null=True),
         "start": Key(BOX, null=True),
         "target": Key(BOX, null=True),
         "swim_speed": Key(FLOATS, size=2, gt=0),

@@ -7,7 +7,7 @@ from flownav.agents.networks import DeterministicPolicy
 from flownav.agents.scene_router import SceneRoutedTeacher, scene_routed
 from flownav.envs import NavigationEnv
 from flownav.envs.observations import observation_size
-from flownav.envs.tasks import REGION_2, FamilyTask, RegionTask
+from flownav.envs.tasks import REGION_1, REGION_2, FamilyTask, RegionTask
 from flownav.errors import CheckpointError
 from flownav.flows.base import WAKE_BOUNDS
 from flownav.flows.families import MixtureFamily, TransformedFamily, UniformFamily
@@ -78,3 +78,14 @@ def test_scene_routing_needs_the_generalist_view_and_one_action_box():
     other = DeterministicPolicy(9, LOW, [2.0, 0.785, 1.571], hidden=[8])
     with pytest.raises(CheckpointError, match="another action box"):
         scene_routed(generalist, "geo_priv", other, "other.pt")
+
+
+def test_the_family_task_poses_the_papers_task_in_the_posed_wake():
+    posed = TransformedFamily([synthetic_wake()], angle_deg=(0, 0), strength=(1, 1), background=(0, 0))
+    turned = TransformedFamily([synthetic_wake()], angle_deg=(10, 80), strength=(1, 1), background=(0, 0))
+    flow = MixtureFamily([posed, turned], [1.0, 1.0], WAKE_BOUNDS)
+    task = FamilyTask(WAKE_BOUNDS, regions_share=0.0, posed_wake_regions_share=1.0)
+    env = NavigationEnv(flow, task, num_envs=512, views=("geo_sincos",), seed=2)
+    env.reset()
+    papers = REGION_1.contains(env.state.pos) & REGION_2.contains(env.state.target)
+    assert 100 < papers.sum() < 412 and torch.equal(papers, env.flow.params["member"] == 0)

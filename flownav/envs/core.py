@@ -192,11 +192,17 @@ def sample_episodes(n: int, flow: FlowField, settings: Settings, rng: torch.Gene
     family flow), drawn from ``rng`` in a fixed order: the task (rejected starts drawn again), theta, psi, t0
     (random_flow_phase with a periodic flow), the strength."""
     device = rng.device
-    start, target = settings.task.sample(n, rng, device)
-    start, target = start.to(device, torch.float32), target.to(device, torch.float32)
-    # Rejection in the unrotated scene: a start must lie in the domain, outside obstacles and the success ball.
     base = flow.base if isinstance(flow, RotatedFlow) else flow
     family = isinstance(flow, FlowFamily)
+    # A family task may pose the paper's task more often where the flow is the wake as posed.
+    posed = (
+        {"posed": flow.wake_as_posed(idx)}
+        if family and getattr(settings.task, "posed_wake_regions_share", None) is not None
+        else {}
+    )
+    start, target = settings.task.sample(n, rng, device, **posed)
+    start, target = start.to(device, torch.float32), target.to(device, torch.float32)
+    # Rejection in the unrotated scene: a start must lie in the domain, outside obstacles and the success ball.
     for _ in range(100):
         bad = (
             ~base.in_domain(start)

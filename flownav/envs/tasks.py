@@ -109,6 +109,9 @@ class FamilyTask:
     """The generalist's training tasks: point-to-point anywhere, the paper's regions, random swim speeds.
 
     * With probability ``regions_share``: start in ``start_region``, target in ``target_region`` (the paper's).
+      For slots whose flow is the wake as posed (``posed``, passed by the env), with probability
+      ``posed_wake_regions_share`` instead (when set): the paper's task in the paper's flow, seen more often
+      without posing it in every other flow.
     * Otherwise: start uniform in ``domain`` shrunk by ``margin`` on every side, target at a distance uniform in
       ``distance`` in a direction uniform on the sphere, drawn again until it lies in the shrunk domain too.
     * :meth:`swim_speed`: the swimmer's speed factor (on ``env.swim_speed_scale``), 1 with probability
@@ -126,6 +129,7 @@ class FamilyTask:
         target_region: Box = REGION_2,
         swim_speed: Sequence[float] = (0.05, 1.0),
         full_speed_share: float = 0.5,
+        posed_wake_regions_share: float | None = None,
     ):
         self.distance = tuple(float(d) for d in distance)
         self.swim_range = tuple(float(s) for s in swim_speed)
@@ -133,7 +137,10 @@ class FamilyTask:
             raise ValueError(f"distance must be [low, high] with 0 < low <= high, got {list(distance)}")
         if len(self.swim_range) != 2 or not 0 < self.swim_range[0] <= self.swim_range[1]:
             raise ValueError(f"swim_speed must be [low, high] with 0 < low <= high, got {list(swim_speed)}")
-        for name, share in (("regions_share", regions_share), ("full_speed_share", full_speed_share)):
+        shares = {"regions_share": regions_share, "full_speed_share": full_speed_share}
+        if posed_wake_regions_share is not None:
+            shares["posed_wake_regions_share"] = posed_wake_regions_share
+        for name, share in shares.items():
             if not 0 <= share <= 1:
                 raise ValueError(f"{name} is a fraction in [0, 1], got {share}")
         lo = tuple(x + margin for x in domain.lo)
@@ -144,11 +151,17 @@ class FamilyTask:
         self.anywhere = DistanceTask(self.box, self.distance)
         self.regions = RegionTask(start_region, target_region)
         self.regions_share, self.full_speed_share = float(regions_share), float(full_speed_share)
+        self.posed_wake_regions_share = None if posed_wake_regions_share is None else float(posed_wake_regions_share)
 
-    def sample(self, n: int, generator: torch.Generator | None = None, device="cpu") -> tuple[Tensor, Tensor]:
+    def sample(
+        self, n: int, generator: torch.Generator | None = None, device="cpu", posed: Tensor | None = None
+    ) -> tuple[Tensor, Tensor]:
         start, target = self.anywhere.sample(n, generator, device)
         r_start, r_target = self.regions.sample(n, generator, device)
-        paper = torch.rand(n, 1, generator=generator, device=device) < self.regions_share
+        share = torch.full((n, 1), self.regions_share, device=device)
+        if posed is not None and self.posed_wake_regions_share is not None:
+            share = torch.where(posed[:, None], self.posed_wake_regions_share, share)
+        paper = torch.rand(n, 1, generator=generator, device=device) < share
         return torch.where(paper, r_start, start), torch.where(paper, r_target, target)
 
     def swim_speed(self, n: int, generator: torch.Generator | None = None, device="cpu") -> Tensor:
