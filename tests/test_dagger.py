@@ -100,6 +100,7 @@ def test_dagger_learns_the_teacher(teacher_ckpt, tmp_path):
     # The normaliser holds the statistics of all aggregated observations.
     obs = payload["train_state"]["buffer"]["obs"]  # the filled part of the buffer, in last.pt
     assert len(obs) == 5 * 64 * 60
+    assert obs.untyped_storage().nbytes() == obs.numel() * obs.element_size()  # not the buffer's whole capacity
     assert torch.allclose(policy.normalizer.mean, obs.mean(0), atol=1e-4)
     assert torch.allclose(policy.normalizer.var, obs.var(0, unbiased=False), rtol=1e-3)
 

@@ -59,8 +59,9 @@ NON_FINITE_FIX = "check algo.lr, algo.grad_clip and algo.weight_decay"
 
 
 def buffer_contents(buffer) -> dict:
-    """The filled part of the buffer, in storage order (what a checkpoint keeps of it)."""
-    return buffer[:].to_dict() if len(buffer) else {}
+    """The filled part of the buffer, in storage order (what a checkpoint keeps of it). Copied: ``buffer[:]`` is a
+    view, and torch.save writes a view's whole storage, the buffer's full capacity."""
+    return buffer[:].clone().to_dict() if len(buffer) else {}
 
 
 def refill_buffer(buffer, contents: dict, frames: int) -> None:
