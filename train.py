@@ -32,7 +32,7 @@ from omegaconf import DictConfig, OmegaConf
 from flownav import schema
 from flownav.algorithms import ALGORITHMS
 from flownav.atomic import atomic_write_text
-from flownav.checkpoint import find_resume, load_resume_checkpoint
+from flownav.checkpoint import check_resume_settings, find_resume, load_resume_checkpoint
 from flownav.errors import reported_as_one_line
 from flownav.resume import resolve_resume
 from flownav.shipping import ship_run, train_targets
@@ -71,7 +71,8 @@ def run(cfg: DictConfig, run_dir: str | Path) -> dict:
     targets = train_targets(cfg, multirun=multirun_jobs() is not None)
     if cfg.resume:
         run_dir, _ = find_resume(cfg.resume)
-        load_resume_checkpoint(cfg.resume, str(cfg.obs.view), needs=algo.RESUME_NEEDS)
+        _, payload = load_resume_checkpoint(cfg.resume, str(cfg.obs.view), needs=algo.RESUME_NEEDS)
+        check_resume_settings(cfg.resume, payload, OmegaConf.to_container(cfg, resolve=True))
     torch.set_num_threads(pick_threads(cfg))
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)

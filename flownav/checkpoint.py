@@ -244,6 +244,59 @@ def load_resume_checkpoint(resume, expect_obs: str, needs=()) -> tuple[Path, dic
     return path, payload
 
 
+# What a resume may change: the budget, where and how it runs, logging and shipping. Anything else would not
+# continue the run it names (another env size, network, flow, optimiser setting, ...).
+RESUME_MAY_CHANGE = (
+    "resume",
+    "threads",
+    "device",
+    "checkpoint_every",
+    "ship",
+    "output_checkpoint",
+    "teacher_checkpoint",
+    "logger",
+    "algo.total_frames",
+    "algo.iterations",
+    "algo.results_json",
+    "algo.final_eval_episodes",
+)
+
+
+def _flat(tree, prefix=""):
+    if isinstance(tree, dict):
+        out = {}
+        for k, v in tree.items():
+            out |= _flat(v, f"{prefix}{k}.")
+        return out or {prefix[:-1]: {}}
+    return {prefix[:-1]: tree}
+
+
+def check_resume_settings(resume, payload: dict, config: dict) -> None:
+    """Refuse (a config error) a resume whose config differs from the run's own (``payload['meta']['config']``)
+    in a key outside :data:`RESUME_MAY_CHANGE`, naming the keys with both values."""
+    saved = (payload.get("meta") or {}).get("config")
+    if not isinstance(saved, dict):
+        raise ConfigError(f"resume={resume}: its checkpoint records no config; resume a run of this version")
+    there, here = _flat(saved), _flat(config)
+    allowed = lambda key: any(key == k or key.startswith(k + ".") for k in RESUME_MAY_CHANGE)  # noqa: E731
+    missing = object()
+    differ = [
+        k
+        for k in sorted(there.keys() | here.keys())
+        if not allowed(k) and there.get(k, missing) != here.get(k, missing)
+    ]
+    if differ:
+        shown = "; ".join(
+            f"{k}={there[k] if k in there else '(unset)'} there, {here[k] if k in here else '(unset)'} here"
+            for k in differ[:3]
+        )
+        raise ConfigError(
+            f"resume={resume}: this config differs from the run's ({shown}{'; ...' if len(differ) > 3 else ''}); "
+            "a resume continues that run with its settings: drop these overrides (a resume may change only "
+            "the budget algo.total_frames / algo.iterations, threads, device, logger, checkpoint_every and shipping)"
+        )
+
+
 def load_policy(path, expect_obs: str | None = None, device="cpu") -> tuple[DeterministicPolicy, dict]:
     """Rebuild the deterministic policy of a checkpoint; refuse one that reads another view."""
     payload = load_checkpoint(path)

@@ -64,6 +64,7 @@ CASES = [
     ("train_time_limit_inf", [*TRAIN, "env.time_limit=inf"], "env.time_limit"),
     ("train_log_every_zero", [*TRAIN, "algo.log_every=0"], "algo.log_every"),
     ("train_misalignment_nan", [*TRAIN, "env.misalignment_deg=nan"], "env.misalignment_deg"),
+    ("train_task_not_fitting_flow", [*TRAIN, "flow=abc"], "task= does not fit flow="),
     ("train_cuda", [*TRAIN, "device=cuda"], "device=cuda"),
     ("evaluate_cuda", [*EVALUATE, "device=cuda"], "device=cuda"),
     ("train_hidden_mismatch", [*TRAIN, "algo.init_from={small}"], "hidden=[16]"),

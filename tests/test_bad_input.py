@@ -189,6 +189,11 @@ CASES = [
         train_case("algo.minibatch_size=100000000"),
         "algo.minibatch_size (100000000) exceeds a batch of env.num_envs x algo.rollout_steps = 32768",
     ),
+    (
+        "task_not_fitting_flow",
+        train_case("flow=abc", "algo.total_frames=1"),
+        "task= does not fit flow=: after 100 draws some of the task's starts still lie outside the flow's domain, inside an obstacle or within env.reward.success_radius of their target; pick a task made for this flow (e.g. flow=abc with task=abc, as +experiment=teacher_abc does)",
+    ),
     # devices
     (
         "cuda",

@@ -418,6 +418,27 @@ def test_resume_accepts_only_a_run_directory_and_writes_nothing_before_its_check
     assert not (tmp_path / "run").exists() and tree_digest(*SHIPPED) == before
 
 
+def test_a_resume_with_other_settings_is_refused_before_anything_is_written(tmp_path):
+    """A resume continues its run with the run's settings: another env size (which used to end in a ValueError
+    traceback from the env state) or network is one line naming the keys, and the run directory is left as it was;
+    the budget may change."""
+    import train
+
+    run = tmp_path / "run"
+    train.run(compose_train(*PPO_TINY, "algo.total_frames=2048"), run)  # one iteration of 128 x 16
+    files = {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
+    for override, message in (
+        ("env.num_envs=64", "env.num_envs=128 there, 64 here"),
+        ("algo.actor.hidden=[16,16]", "algo.actor.hidden=[32, 32] there, [16, 16] here"),
+        ("algo.rollout_steps=8", "algo.rollout_steps=16 there, 8 here"),
+    ):
+        cfg = compose_train(*PPO_TINY, "algo.total_frames=4096", override, f"resume={run}")
+        with pytest.raises(ConfigError, match=re.escape(f"this config differs from the run's ({message})")):
+            train.run(cfg, tmp_path / "unused")
+        assert {p: p.read_bytes() for p in run.rglob("*") if p.is_file()} == files  # no config_resumed.yaml
+    assert not (tmp_path / "unused").exists()
+
+
 class _Parsed(Exception):
     """Raised instead of parsing: carries the command line's parser."""
 

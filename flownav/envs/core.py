@@ -41,7 +41,7 @@ from flownav.envs.observations import (
 )
 from flownav.envs.reward import RewardConfig, step_reward
 from flownav.envs.tasks import REGION_2
-from flownav.errors import require_finite
+from flownav.errors import ConfigError, require_finite
 from flownav.flows.base import FlowField
 from flownav.flows.families import FlowFamily
 from flownav.flows.grid import GridFlow
@@ -214,7 +214,11 @@ def sample_episodes(n: int, flow: FlowField, settings: Settings, rng: torch.Gene
         fresh, _ = settings.task.sample(n, rng, device)
         start = torch.where(bad[:, None], fresh.to(start), start)
     else:
-        raise ValueError("the task keeps sampling starts outside the domain or inside an obstacle")
+        raise ConfigError(
+            "task= does not fit flow=: after 100 draws some of the task's starts still lie outside the flow's domain, "
+            "inside an obstacle or within env.reward.success_radius of their target; pick a task made for this flow "
+            "(e.g. flow=abc with task=abc, as +experiment=teacher_abc does)"
+        )
     theta = (torch.rand(n, generator=rng, device=device) * 2 - 1) * math.pi
     psi = torch.asin(torch.rand(n, generator=rng, device=device) * 2 - 1)  # uniform on the sphere
     if settings.misalignment_deg:
