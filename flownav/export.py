@@ -33,6 +33,21 @@ INPUT_NAME, OUTPUT_NAME = "observation", "action"
 PAPER_RESULTS = RESULTS_DIR / "paper.json"
 
 
+USAGE = """usage: python -m flownav.export checkpoint=PATH [format=onnx|torchscript] [out=PATH]
+
+Write the checkpoint's deterministic policy (normaliser included) as one file a robot can run, and its card
+(<out>.json: the observation view, each input's meaning and units, the action bounds, the training flow and
+its success numbers).
+
+arguments (key=value):
+  checkpoint  a policy checkpoint, e.g. checkpoints/student.pt (required; a relative path not found here is
+              taken from the repository)
+  format      onnx (default; needs the [export] extra) or torchscript
+  out         the model file (default: exports/<checkpoint name>.onnx, or .pt for torchscript)
+
+More: docs/ecosystem.md, "Exporting a policy"."""
+
+
 class ExportError(ConfigError):
     """A bad argument of ``python -m flownav.export``; the message names the key and the fix."""
 
@@ -259,8 +274,12 @@ def parse_arguments(argv) -> dict:
 def main(argv=None) -> int:
     """Bad input (an argument, a checkpoint): ``error: <one line>`` on stderr, exit status 2, as train.py and
     evaluate.py (FLOWNAV_DEBUG=1 shows the traceback)."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if {"-h", "--help", "help"} & set(argv):
+        print(USAGE)
+        return 0
     with reported_as_one_line():
-        args = parse_arguments(sys.argv[1:] if argv is None else argv)
+        args = parse_arguments(argv)
         torch.set_num_threads(1)
         model, card = export_policy(args["checkpoint"], args["format"], args["out"])
     print(f"wrote {model} and its card {card}")

@@ -224,7 +224,7 @@ def test_a_run_outside_the_tolerance_says_so_in_one_warning_block():
     assert "  St = 0.77, reference 0.203 +- 7% (off by 279%)" in lines and not any("Cd =" in ln for ln in lines)
 
 
-def test_generate_help_gives_every_option_its_default():
+def test_generate_help_gives_every_option_its_default_the_units_and_the_closing_check():
     from flownav.cfd.__main__ import parser
 
     gen = parser()._subparsers._group_actions[0].choices["generate"]
@@ -233,9 +233,36 @@ def test_generate_help_gives_every_option_its_default():
         if action.dest == "help":
             continue
         assert action.help, action.dest
-        stated = f"default: {action.default}" if action.default is not argparse.SUPPRESS else "default: <run-dir>"
+        if action.default is argparse.SUPPRESS:  # the default is stated in the help text itself
+            assert "(default: " in action.help, action.dest
+            continue
+        stated = f"default: {action.default}"
         assert stated.replace("[", "").split(",")[0] in text.replace("[", ""), action.dest
     assert "--out data/cylinder_re300" in text  # the shipped dataset is written only when named
+    assert {"--threads", "--device"} <= {s for a in gen._actions for s in a.option_strings}  # not only before it
+    assert "lengths in cylinder diameters D, velocities in the inflow speed U, times in D/U" in text
+    assert "(St 0.203 +- 7%, Cd 1.27 +- 12%, rms w / U >= 0.02)" in text and "WARNING block on stderr" in text
+
+
+def test_generate_command_ends_with_the_warning_when_the_wake_is_off(tmp_path, monkeypatch, capsys):
+    """python -m flownav.cfd generate: a run whose Strouhal number is off (a too-coarse lattice gave 0.77) says
+    so after everything else it prints; a run inside the tolerance prints no warning."""
+    from flownav.cfd import dataset
+    from flownav.cfd.__main__ import main
+
+    good = {"St": 0.205, "St_probe_spectrum": 0.2, "Cd_mean": 1.3, "Cl_rms": 0.5, "rms_w_near_wake": 0.05}
+    good |= {"loop_seam_jump": 2.0, "window_periods": 6, "frames_per_period": 19}
+    for diag in (good, {**good, "St": 0.77}):
+        monkeypatch.setattr(dataset, "generate", lambda *args, diag=diag: diag)
+        main(["generate", "--threads", "1", "--run-dir", str(tmp_path)])
+        captured = capsys.readouterr()
+        assert "wrote " in captured.out
+        if diag is good:
+            assert captured.err == ""
+            continue
+        err = captured.err.splitlines()
+        assert err[1] == "WARNING: this wake is OUTSIDE the validation tolerance of a 3D Re = 300 cylinder wake:"
+        assert "  St = 0.77, reference 0.203 +- 7% (off by 279%)" in err and err[-1] == "=" * 78
 
 
 def test_generator_refuses_fractional_lattice_steps_and_non_positive_sizes():

@@ -102,3 +102,15 @@ def test_bad_arguments_one_line(argv, message, capsys, tmp_path, monkeypatch):
     assert exit_.value.code == 2
     assert capsys.readouterr().err == message
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("flag", ["--help", "-h"])
+def test_help_lists_every_argument_and_writes_nothing(flag, capsys, tmp_path, monkeypatch):
+    from flownav.export import ARGUMENTS, FORMATS
+
+    monkeypatch.chdir(tmp_path)
+    assert main([flag]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: python -m flownav.export checkpoint=PATH")
+    assert all(f"\n  {key} " in out for key in ARGUMENTS) and all(fmt in out for fmt in FORMATS)
+    assert list(tmp_path.iterdir()) == []

@@ -61,3 +61,16 @@ def test_the_module_map_lists_every_module():
     files += list((REPO_ROOT / "scripts").glob("*.py"))
     missing = sorted(str(p.relative_to(REPO_ROOT)) for p in files if p.name not in block)
     assert not missing, f"the README's module map does not name {missing}"
+
+
+def test_the_tests_the_docs_name_exist():
+    """Every ``tests/<file>.py`` and ``tests/<file>.py::<test>`` named in the README and docs/ is there."""
+    texts = [readme_text(), *(p.read_text() for p in sorted((REPO_ROOT / "docs").glob("*.md")))]
+    named = {m.groups() for text in texts for m in re.finditer(r"tests/(test_\w+\.py)(?:::(\w+))?", text)}
+    assert named, "the docs name no tests"
+    missing = []
+    for file, test in sorted(named, key=lambda n: (n[0], n[1] or "")):
+        path = REPO_ROOT / "tests" / file
+        if not path.is_file() or (test and not re.search(rf"^def {test}\(", path.read_text(), flags=re.M)):
+            missing.append(f"tests/{file}" + (f"::{test}" if test else ""))
+    assert not missing, f"the docs name tests that do not exist: {missing}"

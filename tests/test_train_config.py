@@ -66,6 +66,8 @@ def test_launcher_is_an_installed_hydra_plugin(launcher):
 
     cfg = cfg_of("+experiment=teacher", f"hydra/launcher={launcher}", hydra=True)
     get_class(cfg.hydra.launcher._target_)  # raises if the plugin package is missing
+    if launcher == "slurm":  # a preempted or timed-out job is requeued, with time to write its last checkpoint
+        assert cfg.hydra.launcher.max_num_timeout > 0 and cfg.hydra.launcher.signal_delay_s > 0
 
 
 def run_app(*args, timeout=120):

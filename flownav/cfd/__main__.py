@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -38,6 +39,32 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
+THREADS, DEVICE = 2, "cpu"
+DEVICE_HELP = "torch device (cpu runs the C kernel)"
+
+
+def generate_description() -> str:
+    from flownav.cfd.validate import REF_3D
+
+    text = (
+        "Simulate the 3D cylinder wake (resuming from --run-dir) and write the dataset. Units: lengths in cylinder "
+        "diameters D, velocities in the inflow speed U, times in D/U; options in lattice units say so.\n\n"
+        "At the end the run's Strouhal number, mean drag coefficient and near-wake rms w are checked against a "
+        f"3D Re = 300 wake (St {REF_3D['St']:g} +- {100 * REF_3D['St_tol']:g}%, Cd {REF_3D['Cd']:g} +- "
+        f"{100 * REF_3D['Cd_tol']:g}%, rms w / U >= {REF_3D['rms_w_min']:g}): a run outside them ends with a "
+        "WARNING block on stderr."
+    )
+    return "\n\n".join(textwrap.fill(paragraph, 79) for paragraph in text.split("\n\n"))
+
+
+def _run_args(p: argparse.ArgumentParser) -> None:
+    """--threads and --device after the command too (before it, as the top-level options, works as well)."""
+    p.add_argument(
+        "--threads", type=int, default=argparse.SUPPRESS, help=f"torch / OpenMP threads (default: {THREADS})"
+    )
+    p.add_argument("--device", default=argparse.SUPPRESS, help=f"{DEVICE_HELP} (default: {DEVICE})")
+
+
 def _sim_args(p: argparse.ArgumentParser, defaults: SimConfig) -> None:
     p.add_argument("--re", type=float, default=defaults.re, help="Reynolds number U D / nu")
     p.add_argument("--cells-per-d", type=int, default=defaults.cells_per_d, help="lattice cells per diameter D")
@@ -56,11 +83,17 @@ def _sim_args(p: argparse.ArgumentParser, defaults: SimConfig) -> None:
 
 def parser() -> argparse.ArgumentParser:
     top = _Parser(prog="python -m flownav.cfd", description=__doc__, formatter_class=_Help)
-    top.add_argument("--threads", type=int, default=2, help="torch / OpenMP threads")
-    top.add_argument("--device", default="cpu", help="torch device (cpu runs the C kernel)")
+    top.add_argument("--threads", type=int, default=THREADS, help="torch / OpenMP threads")
+    top.add_argument("--device", default=DEVICE, help=DEVICE_HELP)
     sub = top.add_subparsers(dest="cmd", required=True)
 
-    gen = sub.add_parser("generate", help="simulate and write a wake dataset", formatter_class=_Help)
+    gen = sub.add_parser(
+        "generate",
+        help="simulate and write a wake dataset",
+        description=generate_description(),
+        formatter_class=_Help,
+    )
+    _run_args(gen)
     g_def = GenerateConfig()
     _sim_args(gen, g_def.sim)
     gen.add_argument("--span", type=float, default=g_def.sim.span, help="periodic span Lz, D")
@@ -85,6 +118,7 @@ def parser() -> argparse.ArgumentParser:
     )
 
     val = sub.add_parser("validate", help="2D Re=100 run + 3D dataset check", formatter_class=_Help)
+    _run_args(val)
     val.add_argument("--dataset", type=Path, default=SHIPPED_DATASET, help="3D dataset whose diagnostics to check")
     val.add_argument("--run-dir", type=Path, default=Path("runs/cfd/validate_2d_re100"), help="2D run directory")
     val.add_argument(
@@ -98,6 +132,7 @@ def parser() -> argparse.ArgumentParser:
     )
 
     plot = sub.add_parser("plot", help="wake figures", formatter_class=_Help)
+    _run_args(plot)
     plot.add_argument("--dataset", type=Path, default=SHIPPED_DATASET, help="wake dataset to draw")
     plot.add_argument(
         "--out-dir",

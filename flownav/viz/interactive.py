@@ -179,8 +179,12 @@ def main(argv=None) -> str:
     p.add_argument(
         "--out", default="outputs/html/trajectories.html", help="the HTML file to write (default: %(default)s)"
     )
-    p.add_argument("--episodes", type=int, default=1, help="episodes per policy (same starts and targets)")
-    p.add_argument("--seed", type=int, default=0, help="evaluation seed (starts, targets, flow phase)")
+    p.add_argument(
+        "--episodes", type=int, default=1, help="episodes per policy (same starts and targets; default: %(default)s)"
+    )
+    p.add_argument(
+        "--seed", type=int, default=0, help="evaluation seed: starts, targets, flow phase (default: %(default)s)"
+    )
     a, overrides = p.parse_known_args(argv)
     from flownav.builders import build_flow, build_task, compose_config
     from flownav.checkpoint import load_policy
