@@ -6,10 +6,11 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from flownav.builders import ConfigError, build_flow, build_task
+from flownav.builders import build_flow, build_task
 from flownav.envs import NavigationEnv
 from flownav.envs.observations import observation_size
 from flownav.envs.tasks import REGION_1, REGION_2, FamilyTask
+from flownav.errors import ConfigError
 from flownav.flows import FunctionFlow, UniformFlow
 from flownav.flows.base import WAKE_BOUNDS, Cylinder
 from flownav.flows.families import (
