@@ -49,3 +49,20 @@ def test_plain_collection_loop_of_the_train_benchmark_is_the_env():
         assert torch.equal(td["geo_sincos"], obs), f"step {step}"
         td["action"] = action
         _, td = env.step_and_maybe_reset(td)
+
+
+def test_eval_benchmark_times_the_protocols_episodes():
+    """eval_throughput.py times flownav.evaluation.evaluate on the training env: its success is evaluate.py's."""
+    from flownav.builders import compose_config
+    from flownav.envs import RegionTask
+    from flownav.evaluation import EvalSpec, evaluate
+    from flownav.evaluation.scripted import HeadToTarget
+
+    bench = _load("eval_throughput")
+    flow = UniformFlow((0.9, 0.0, 0.0), bounds=WAKE_BOUNDS)  # nearly the swim speed: about 80% arrive
+    policy = HeadToTarget()
+    timed = bench.time_eval(policy, "geo", flow, 1, episodes=300, chunk=100)
+    spec = EvalSpec(flow, RegionTask(), compose_config().env, 300, chunk_size=100)
+    summary = evaluate(policy, "geo", spec).summary
+    assert timed["episodes"] == 300 and timed["success_rate"] == summary["success_rate"]
+    assert 0 < summary["success_rate"] < 1  # a stream that beats some swimmers: the episodes are told apart
