@@ -1,22 +1,17 @@
 """The benchmarks' own code paths at tiny size, so that a change of the env's internals cannot break them
 unseen (their timings are never asserted)."""
 
-import importlib.util
-
 import torch
+from load import load_module
 
 from flownav.agents.actor_critic import make_actor_critic
 from flownav.envs import NavigationEnv
 from flownav.flows import UniformFlow
 from flownav.flows.base import WAKE_BOUNDS
-from flownav.paths import REPO_ROOT
 
 
 def _load(name):
-    spec = importlib.util.spec_from_file_location(name, REPO_ROOT / "benchmarks" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_module(f"benchmarks/{name}.py")
 
 
 def test_plain_collection_loop_of_the_train_benchmark_is_the_env():

@@ -4,6 +4,7 @@ import math
 
 import pytest
 import torch
+from load import load_module
 from omegaconf import OmegaConf
 
 from flownav.builders import build_flow, build_task
@@ -257,12 +258,7 @@ def test_a_generalist_student_imitates_a_privileged_teacher(tmp_path):
 
 
 def test_family_benchmark_code_path_runs():
-    import importlib.util
-
-    path = REPO_ROOT / "benchmarks" / "family_throughput.py"
-    spec = importlib.util.spec_from_file_location("family_throughput", path)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_module("benchmarks/family_throughput.py")
     step = bench.make_stepper("family_fourier", ("geo_priv", "geo_priv_critic"), 8)
     assert bench.window_rate(step, 8, 0.01) > 0
 

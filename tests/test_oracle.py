@@ -2,6 +2,7 @@
 
 import pytest
 import torch
+from load import load_module
 
 from flownav.envs import ListTask, NavigationEnv, RegionTask
 from flownav.evaluation.metrics import summarize
@@ -60,17 +61,13 @@ def test_oracle_settings_are_checked():
 
 def test_the_settings_script_runs_the_suites_abc_tests():
     """scripts/oracle_settings.py measures on the suite's ABC tests: the same flow, task and env configs."""
-    import importlib.util
-
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
     from flownav.evaluation.experiments import Suite
     from flownav.paths import REPO_ROOT
 
-    spec = importlib.util.spec_from_file_location("oracle_settings", REPO_ROOT / "scripts" / "oracle_settings.py")
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
+    script = load_module("scripts/oracle_settings.py")
     for test, experiment in (("as_posed", "paper_abc"), ("periodic", "abc_periodic")):
         with initialize_config_dir(config_dir=str(REPO_ROOT / "conf" / "evaluate"), version_base="1.3"):
             cfg = compose("config", overrides=[f"+experiment={experiment}"])
