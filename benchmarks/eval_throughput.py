@@ -25,9 +25,9 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from common import machine, write_result  # noqa: E402
 
 from flownav.agents import DeterministicPolicy  # noqa: E402
-from flownav.envs import NavigationEnv, RegionTask  # noqa: E402
-from flownav.evaluation.metrics import summarize  # noqa: E402
-from flownav.evaluation.rollout import run_episodes  # noqa: E402
+from flownav.builders import compose_config  # noqa: E402
+from flownav.envs import RegionTask  # noqa: E402
+from flownav.evaluation import EvalSpec, evaluate  # noqa: E402
 from flownav.evaluation.scripted import ACTION_LOW, action_high  # noqa: E402
 from flownav.flows.synthetic import synthetic_wake  # noqa: E402
 
@@ -47,17 +47,16 @@ class Hover(torch.nn.Module):
         return torch.cat((a[:, :1] * 0, a[:, 1:]), -1)
 
 
-def time_eval(policy, obs: str, flow, threads: int, episodes: int = EPISODES, chunk: int = EPISODES, **env_kw) -> dict:
+def time_eval(policy, obs: str, flow, threads: int, episodes: int = EPISODES, chunk: int = EPISODES) -> dict:
+    """The wall time of flownav.evaluation.evaluate on the training env and task, held-out episodes."""
     torch.set_num_threads(threads)
+    env_cfg = compose_config().env
 
-    def make_env(n, c):
-        return NavigationEnv(flow, RegionTask(), num_envs=n, views=(obs,), seed=c, **env_kw)
-
-    run_episodes(policy, obs, make_env, 256, 256)  # warm-up
+    evaluate(policy, obs, EvalSpec(flow, RegionTask(), env_cfg, 256, chunk_size=256))  # warm-up
     t0 = time.perf_counter()
-    ep = run_episodes(policy, obs, make_env, episodes, chunk)
+    result = evaluate(policy, obs, EvalSpec(flow, RegionTask(), env_cfg, episodes, chunk_size=chunk))
     seconds = time.perf_counter() - t0
-    s = summarize(ep.status, ep.time)
+    ep, s = result.episodes, result.summary
     steps = float(ep.time.sum() / 0.2)
     return {
         "threads": threads,
@@ -88,7 +87,7 @@ def main() -> None:
     for threads in (1, 2):
         for name, pol, obs in (("student_256x256", Hover(student), "ego"), ("teacher_128x128", Hover(teacher), "geo")):
             key = f"worst_case_{name}_threads{threads}"
-            out["runs"][key] = time_eval(pol, obs, flow, threads, random_flow_phase=True)
+            out["runs"][key] = time_eval(pol, obs, flow, threads)
             print(key, out["runs"][key], flush=True)
 
     data, ck = ROOT / "data" / "cylinder_re300", ROOT / "checkpoints"

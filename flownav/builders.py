@@ -29,7 +29,7 @@ from flownav.flows.grid import load_grid_flow
 from flownav.flows.transforms import RotatedFlow, ScaledFlow
 from flownav.paths import DEFAULT_FLOW_DATASET, REPO_ROOT, resolve
 
-__all__ = ["ConfigError", "build_env", "build_flow", "build_task", "compose_config"]
+__all__ = ["build_env", "build_flow", "build_task", "compose_config"]
 
 
 def _box(value) -> Box:

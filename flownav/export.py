@@ -48,10 +48,6 @@ arguments (key=value):
 More: docs/ecosystem.md, "Exporting a policy"."""
 
 
-class ExportError(ConfigError):
-    """A bad argument of ``python -m flownav.export``; the message names the key and the fix."""
-
-
 # ---------------------------------------------------------------------------- what the numbers mean
 def _vector(name: str, meaning: str, units: str, axes: str) -> list[dict]:
     return [{"name": f"{name}_{a}", "meaning": f"{meaning}, {a} component", "units": units} for a in axes]
@@ -114,7 +110,7 @@ VIEW_INPUTS = {
 def observation_inputs(view: str) -> list[dict]:
     """One entry per number of the view, in order: name, meaning, units (L, T: the flow's length and time units)."""
     if view not in VIEW_INPUTS:
-        raise ExportError(f"view {view!r} is not an actor view; an exported policy reads one of {sorted(VIEW_INPUTS)}")
+        raise ConfigError(f"view {view!r} is not an actor view; an exported policy reads one of {sorted(VIEW_INPUTS)}")
     return [{"index": i, **entry} for i, entry in enumerate(VIEW_INPUTS[view]())]
 
 
@@ -219,7 +215,7 @@ def _write_onnx(policy, example: torch.Tensor, out: Path, card_json: str) -> Non
         import onnx
         import onnxscript  # noqa: F401 - torch.onnx's exporter needs it
     except ImportError as e:
-        raise ExportError(f"format=onnx needs {e.name} (the export extra): pip install -e '.[export]'") from e
+        raise ConfigError(f"format=onnx needs {e.name} (the export extra): pip install -e '.[export]'") from e
 
     with tempfile.TemporaryDirectory() as tmp:
         raw = Path(tmp) / "policy.onnx"
@@ -246,7 +242,7 @@ def _write_torchscript(policy, example: torch.Tensor, out: Path, card_json: str)
 def export_policy(checkpoint, fmt: str = "onnx", out=None) -> tuple[Path, Path]:
     """Write the exported policy and its card; returns (model path, card path)."""
     if fmt not in FORMATS:
-        raise ExportError(f"format={fmt}: choose one of {', '.join(FORMATS)}")
+        raise ConfigError(f"format={fmt}: choose one of {', '.join(FORMATS)}")
     checkpoint = resolve(checkpoint)  # like evaluate.py: relative to the repository when not found here
     policy, payload = load_policy(checkpoint)
     out = Path(out) if out else Path("exports") / f"{checkpoint.stem}{FORMATS[fmt]}"
@@ -264,10 +260,10 @@ def parse_arguments(argv) -> dict:
     for arg in argv:
         key, sep, value = arg.partition("=")
         if not sep or key not in ARGUMENTS:
-            raise ExportError(f"unknown argument {arg!r}; use key=value with keys {', '.join(ARGUMENTS)}")
+            raise ConfigError(f"unknown argument {arg!r}; use key=value with keys {', '.join(ARGUMENTS)}")
         args[key] = value
     if not args.get("checkpoint"):
-        raise ExportError("checkpoint= is required, e.g. checkpoint=checkpoints/student.pt")
+        raise ConfigError("checkpoint= is required, e.g. checkpoint=checkpoints/student.pt")
     return args
 
 

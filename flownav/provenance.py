@@ -26,6 +26,16 @@ def sha256(path: str | os.PathLike, length: int | None = 12) -> str:
     return h.hexdigest()[:length]
 
 
+def tree_digest(*paths: str | os.PathLike) -> dict[str, str]:
+    """The full sha256 of every file under ``paths`` (files or directories), by path: what must stay byte-identical."""
+    out = {}
+    for root in map(Path, paths):
+        for f in sorted([root] if root.is_file() else root.rglob("*")):
+            if f.is_file():
+                out[str(f)] = sha256(f, None)
+    return out
+
+
 def git_commit(root: Path = REPO_ROOT) -> str:
     """HEAD, with ``+dirty`` when tracked files differ from it (other engineers edit the same checkout)."""
     try:

@@ -13,8 +13,8 @@ from pathlib import Path
 from omegaconf import OmegaConf
 
 from flownav.atomic import atomic_copy
-from flownav.builders import ConfigError
 from flownav.checkpoint import load_checkpoint, ship_checkpoint
+from flownav.errors import ConfigError
 from flownav.paths import CHECKPOINT_DIR, DATA_DIR, REPO_ROOT, RESULTS_DIR, resolve
 
 SHIPPED = (CHECKPOINT_DIR, RESULTS_DIR, REPO_ROOT / "REPORT.md", DATA_DIR)

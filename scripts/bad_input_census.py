@@ -16,7 +16,6 @@ in-process; this script is the full census (about 45 subprocesses, a few minutes
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
 import subprocess
@@ -26,7 +25,11 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-SHIPPED = ("checkpoints", "results", "data", "REPORT.md")
+sys.path.insert(0, str(ROOT))  # this checkout's flownav, whose entry points the cases run
+
+from flownav.atomic import atomic_write_text  # noqa: E402
+from flownav.provenance import tree_digest  # noqa: E402
+from flownav.shipping import SHIPPED  # noqa: E402
 
 TRAIN = ["train.py", "+experiment=teacher", "logger=csv", "logger.progress=false", "threads=1"]
 STUDENT = ["train.py", "+experiment=student", "logger=csv", "logger.progress=false", "threads=1"]
@@ -180,7 +183,7 @@ def make_files(tmp: Path) -> dict:
         assert load_grid_flow(f[name]).shape == (2, 3, 3, 2)  # the dataset loads before its metadata is broken
         meta = json.loads((f[name] / "meta.json").read_text())
         edit(meta)
-        (f[name] / "meta.json").write_text(json.dumps(meta))
+        atomic_write_text(f[name] / "meta.json", json.dumps(meta))
     f["cfd_run"] = tmp / "cfd_run"  # filled by the first step of its case (a state of another set-up)
     return f
 
@@ -193,16 +196,6 @@ def prepare(case_id: str, files: dict) -> None:
 
         sim = CylinderLBM(SimConfig(re=100, cells_per_d=4, u_lattice=0.15, x_range=(-5, 27), y_half=7.5, span=2.0))
         save_checkpoint(files["cfd_run"] / "state.pt", sim, RunState())
-
-
-def digest() -> dict:
-    out = {}
-    for name in SHIPPED:
-        root = ROOT / name
-        for p in sorted([root] if root.is_file() else root.rglob("*")):
-            if p.is_file():
-                out[str(p)] = hashlib.sha256(p.read_bytes()).hexdigest()
-    return out
 
 
 def run_case(case, files: dict, timeout: float = 600) -> dict:
@@ -236,7 +229,7 @@ def main(argv=None) -> int:
     p.add_argument("--json", type=Path, help="also write the table as JSON here")
     args = p.parse_args(argv)
     cases = [c for c in CASES if args.k in c[0]]
-    before = digest()
+    before = tree_digest(*SHIPPED)
     with tempfile.TemporaryDirectory() as tmp:
         files = make_files(Path(tmp))
         rows = []
@@ -245,12 +238,13 @@ def main(argv=None) -> int:
             rows.append(row)
             print(f"{'ok  ' if row['ok'] else 'FAIL'} {row['id']:32s} rc={row['rc']} {row['s']:5.1f}s  {row['line']}")
         ran_code = files["marker"].exists()
-    changed = [k for k, v in digest().items() if before.get(k) != v] + [k for k in before if k not in digest()]
+    after = tree_digest(*SHIPPED)
+    changed = [k for k, v in after.items() if before.get(k) != v] + [k for k in before if k not in after]
     good = sum(r["ok"] for r in rows)
     print(f"{len(rows)} cases tried, {good} give a one-line error (exit status != 0, no traceback)")
     print(f"shipped files changed: {len(changed)}; code run from a malicious file: {ran_code}")
     if args.json:
-        args.json.write_text(json.dumps({"rows": rows, "changed": changed, "ran_code": ran_code}, indent=1))
+        atomic_write_text(args.json, json.dumps({"rows": rows, "changed": changed, "ran_code": ran_code}, indent=1))
     return 0 if good == len(rows) and not changed and not ran_code else 1
 
 

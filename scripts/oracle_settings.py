@@ -4,8 +4,8 @@
     python scripts/oracle_settings.py 128 periodic          # only the periodic test
 
 Prints, per setting: success, left domain, timeout, mean success time and seconds (wall, one torch thread), on
-the protocol's episodes (flownav.evaluation.protocol, seed EVAL_SEED) of env/default.yaml with the ABC swimmer.
-docs/oracle.md quotes it.
+the protocol's episodes (flownav.evaluation.protocol, seed EVAL_SEED) of the ABC test as the configs define it
+(flow, task and env groups; the suite's paper_abc entry for the test as posed). docs/oracle.md quotes it.
 """
 
 from __future__ import annotations
@@ -16,15 +16,23 @@ import time
 import torch
 from omegaconf import OmegaConf
 
-from flownav.builders import build_task
+from flownav.builders import build_flow, build_task, compose_config
 from flownav.evaluation.oracle import Oracle
 from flownav.evaluation.protocol import EvalSpec, evaluate
-from flownav.flows.analytic import ABCFlow
-from flownav.flows.base import make_periodic
 from flownav.paths import REPO_ROOT
 
-ABC_ENV = {"swim_speed_scale": 0.1}  # the ABC test's swimmer (conf/evaluate/experiment/paper_abc.yaml)
 SETTINGS = ({}, {"horizon": 100, "candidates": 48, "iterations": 2}, {"horizon": 30})
+
+
+def abc_config(test: str):
+    """The ABC test's flow, task and env as the configs define them: the well-posed test
+    (flow/env abc_periodic) or the paper's as posed (the suite's paper_abc entry)."""
+    if test == "periodic":
+        return compose_config(["flow=abc_periodic", "task=abc", "env=abc_periodic"])
+    cfg = compose_config(["flow=abc", "task=abc"])
+    suite = OmegaConf.load(REPO_ROOT / "conf" / "evaluate" / "experiment" / "paper_abc.yaml").suite.abc
+    cfg.env = OmegaConf.merge(cfg.env, suite.env)
+    return cfg
 
 
 def main(argv: list[str]) -> None:
@@ -32,11 +40,9 @@ def main(argv: list[str]) -> None:
     episodes = int(argv[0]) if argv else 64
     tests = argv[1:] or ["periodic", "as_posed"]
     for test in tests:
-        flow = make_periodic(ABCFlow(), ["y", "z"]) if test == "periodic" else ABCFlow()
-        task = build_task(OmegaConf.load(REPO_ROOT / "conf" / "task" / "abc.yaml"), flow)
-        limit = 100.0 if test == "periodic" else 60.0
-        env = OmegaConf.merge(OmegaConf.load(REPO_ROOT / "conf/env/default.yaml"), ABC_ENV, {"time_limit": limit})
-        spec = EvalSpec(flow, task, env, episodes, chunk_size=episodes)
+        cfg = abc_config(test)
+        flow = build_flow(cfg.flow)
+        spec = EvalSpec(flow, build_task(cfg.task, flow), cfg.env, episodes, chunk_size=episodes)
         for kw in SETTINGS:
             t0 = time.time()
             s = evaluate(Oracle(**kw), "geo", spec).summary

@@ -9,7 +9,6 @@ census is scripts/bad_input_census.py (it also makes the files the cases here po
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import subprocess
 import sys
@@ -18,6 +17,7 @@ from pathlib import Path
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
+from load import load_module
 
 from flownav.agents import DeterministicPolicy
 from flownav.checkpoint import save_policy_checkpoint
@@ -34,10 +34,7 @@ TINY = ["flow=uniform", "logger=csv", "logger.progress=false", "threads=1"]
 
 def _census():
     """scripts/bad_input_census.py: the files every bad-input case points at, and the entry-point census."""
-    spec = importlib.util.spec_from_file_location("bad_input_census", ROOT / "scripts" / "bad_input_census.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_module("scripts/bad_input_census.py")
 
 
 census = _census()

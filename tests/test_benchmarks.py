@@ -1,22 +1,17 @@
 """The benchmarks' own code paths at tiny size, so that a change of the env's internals cannot break them
 unseen (their timings are never asserted)."""
 
-import importlib.util
-
 import torch
+from load import load_module
 
 from flownav.agents.actor_critic import make_actor_critic
 from flownav.envs import NavigationEnv
 from flownav.flows import UniformFlow
 from flownav.flows.base import WAKE_BOUNDS
-from flownav.paths import REPO_ROOT
 
 
 def _load(name):
-    spec = importlib.util.spec_from_file_location(name, REPO_ROOT / "benchmarks" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_module(f"benchmarks/{name}.py")
 
 
 def test_plain_collection_loop_of_the_train_benchmark_is_the_env():
@@ -49,3 +44,20 @@ def test_plain_collection_loop_of_the_train_benchmark_is_the_env():
         assert torch.equal(td["geo_sincos"], obs), f"step {step}"
         td["action"] = action
         _, td = env.step_and_maybe_reset(td)
+
+
+def test_eval_benchmark_times_the_protocols_episodes():
+    """eval_throughput.py times flownav.evaluation.evaluate on the training env: its success is evaluate.py's."""
+    from flownav.builders import compose_config
+    from flownav.envs import RegionTask
+    from flownav.evaluation import EvalSpec, evaluate
+    from flownav.evaluation.scripted import HeadToTarget
+
+    bench = _load("eval_throughput")
+    flow = UniformFlow((0.9, 0.0, 0.0), bounds=WAKE_BOUNDS)  # nearly the swim speed: about 80% arrive
+    policy = HeadToTarget()
+    timed = bench.time_eval(policy, "geo", flow, 1, episodes=300, chunk=100)
+    spec = EvalSpec(flow, RegionTask(), compose_config().env, 300, chunk_size=100)
+    summary = evaluate(policy, "geo", spec).summary
+    assert timed["episodes"] == 300 and timed["success_rate"] == summary["success_rate"]
+    assert 0 < summary["success_rate"] < 1  # a stream that beats some swimmers: the episodes are told apart

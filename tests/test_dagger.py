@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
+from tiny import DRIFT_TASK
 
 from flownav.algorithms.dagger import beta_at, imitation_loss
 from flownav.checkpoint import CheckpointError, load_checkpoint, load_policy, save_policy_checkpoint
@@ -20,11 +21,7 @@ CONF = str(ROOT / "conf")
 
 # A weak uniform stream, targets 2-3 D away: the scripted teacher succeeds, the student can learn it in seconds.
 TINY = [
-    "flow=uniform",
-    "flow.velocity=[0.1,0.0,0.0]",
-    "task.start=[[5.0,0.0,5.0],[6.0,1.0,6.0]]",
-    "task.target=[[7.0,0.0,5.0],[8.0,1.0,6.0]]",
-    "env.time_limit=20.0",
+    *DRIFT_TASK,
     "algo.num_envs=64",
     "algo.steps_per_iteration=60",
     "algo.updates_per_iteration=150",
@@ -60,18 +57,20 @@ def rows(run_dir):
         return [r for r in csv.DictReader(f) if r.get("train/loss")]
 
 
-def test_student_experiment_config():
+def test_every_student_imitates_a_teacher_trained_on_its_flow_and_task():
+    """Each DAgger experiment's teacher checkpoint is made by a PPO experiment on the same flow and task, read
+    through another view than the student's, and the student acts alone from the first step (the paper's beta 0)."""
+    experiments = sorted(p.stem for p in (ROOT / "conf" / "experiment").glob("*.yaml"))
     with initialize_config_dir(config_dir=CONF, version_base="1.3"):
-        cfg = compose("config", overrides=["+experiment=student"])
-    assert cfg.algo.name == "dagger" and cfg.obs.view == "ego" and cfg.algo.teacher_view is None  # the checkpoint's
-    assert cfg.teacher_checkpoint == "checkpoints/teacher.pt" and cfg.output_checkpoint == "checkpoints/student.pt"
-    assert cfg.algo.beta.initial == 0.0  # the paper: the student acts alone
-    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
-        flow = compose("config", overrides=["+experiment=student_flowobs"])
-        sym = compose("config", overrides=["+experiment=student_symmetric"])
-    assert flow.obs.view == "ego_flow" and flow.algo.teacher_view is None
-    assert flow.teacher_checkpoint == "checkpoints/teacher_flowobs.pt"
-    assert sym.task.type == "symmetric" and sym.teacher_checkpoint == "checkpoints/teacher_symmetric.pt"
+        cfgs = {e: compose("config", overrides=[f"+experiment={e}"]) for e in experiments}
+    makers = {c.output_checkpoint: e for e, c in cfgs.items() if c.algo.name == "ppo" and c.output_checkpoint}
+    students = {e: c for e, c in cfgs.items() if c.algo.name == "dagger"}
+    assert students
+    for name, cfg in students.items():
+        teacher = makers.get(cfg.teacher_checkpoint, Path(cfg.teacher_checkpoint).stem)  # selection ships by name
+        assert teacher in cfgs and cfgs[teacher].algo.name == "ppo", f"{name}: {cfg.teacher_checkpoint}"
+        assert cfgs[teacher].flow == cfg.flow and cfgs[teacher].task == cfg.task, f"{name} vs {teacher}"
+        assert cfgs[teacher].obs.view != cfg.obs.view and cfg.algo.beta.initial == 0.0, name
 
 
 def test_beta_schedule_and_loss():

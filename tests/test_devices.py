@@ -7,8 +7,8 @@ import pytest
 import torch
 from tiny import TINY_PPO, compose_train
 
-from flownav.builders import ConfigError
 from flownav.devices import check_on_device, resolve_device
+from flownav.errors import ConfigError
 
 TINY = [*TINY_PPO, "algo.eval_every=2", "algo.eval_episodes=8", "algo.final_eval_episodes=16"]
 TINY += ["logger.figure_episodes=2"]

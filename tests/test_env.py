@@ -10,7 +10,7 @@ from omegaconf import OmegaConf
 from tensordict import TensorDict
 from torchrl.envs.utils import check_env_specs
 
-from flownav.builders import ConfigError, build_env, build_flow, build_task
+from flownav.builders import build_env, build_flow, build_task
 from flownav.envs import (
     REGION_1,
     REGION_2,
@@ -24,6 +24,7 @@ from flownav.envs import (
 )
 from flownav.envs.kinematics import body_frame, heading_vector, to_body
 from flownav.envs.observations import HISTORY_LEN, HISTORY_STRIDE, State, compute_views
+from flownav.errors import ConfigError
 from flownav.flows import Box, FunctionFlow, UniformFlow, rotate_z
 from flownav.flows.base import WAKE_BOUNDS, Cylinder
 from flownav.paths import REPO_ROOT

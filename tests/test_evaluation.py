@@ -435,6 +435,32 @@ def test_report_puts_the_paper_next_to_ours(tmp_path):
     assert json.loads((tmp_path / "paper.json").read_text())["experiments"]["training"]["provenance"]["commit"]
 
 
+def test_the_loss_curve_section_takes_the_papers_numbers_from_the_config_only(tmp_path):
+    """Fig. 2c's paper curve is stated once in its REPORT.md section: the config's paper_ref, not the kind's code."""
+    from omegaconf import OmegaConf
+
+    from flownav.evaluation.report import merge_results, write_report
+    from flownav.provenance import provenance
+
+    spec = OmegaConf.load(ROOT / "conf/evaluate/experiment/paper_loss_curves.yaml").suite.loss_curves
+    curve = {"runs": 2, "iteration": [1, 2, 3, 4, 5], "mean": [0.8, 0.5, 0.3, 0.2, 0.15], "std": [0.1] * 5}
+    res = {
+        "loss_curves": {
+            "title": str(spec.title),
+            "kind": "loss_curves",
+            "paper_ref": "Fig. 2c (the paper's curve as the config states it)",
+            "curve": curve,
+            "missing": [],
+            "policies": {},
+        }
+    }
+    data = merge_results(tmp_path / "paper.json", res, provenance("python evaluate.py +experiment=paper"))
+    text = write_report(data, tmp_path / "REPORT.md", "python evaluate.py +experiment=paper").read_text()
+    section = text[text.index(f"## {spec.title}") :]
+    assert "Paper: Fig. 2c (the paper's curve as the config states it)." in section
+    assert section.count("paper") == 1, section  # the kind's own lines quote no paper numbers
+
+
 def test_provenance_is_the_code_before_the_run(tiny_world, monkeypatch, tmp_path):
     """The suite's own outputs (figures, results) are tracked files: the commit is read before they change."""
     import evaluate

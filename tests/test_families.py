@@ -4,12 +4,14 @@ import math
 
 import pytest
 import torch
+from load import load_module
 from omegaconf import OmegaConf
 
-from flownav.builders import ConfigError, build_flow, build_task
+from flownav.builders import build_flow, build_task
 from flownav.envs import NavigationEnv
 from flownav.envs.observations import observation_size
 from flownav.envs.tasks import REGION_1, REGION_2, FamilyTask
+from flownav.errors import ConfigError
 from flownav.flows import FunctionFlow, UniformFlow
 from flownav.flows.base import WAKE_BOUNDS, Cylinder
 from flownav.flows.families import (
@@ -257,12 +259,7 @@ def test_a_generalist_student_imitates_a_privileged_teacher(tmp_path):
 
 
 def test_family_benchmark_code_path_runs():
-    import importlib.util
-
-    path = REPO_ROOT / "benchmarks" / "family_throughput.py"
-    spec = importlib.util.spec_from_file_location("family_throughput", path)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_module("benchmarks/family_throughput.py")
     step = bench.make_stepper("family_fourier", ("geo_priv", "geo_priv_critic"), 8)
     assert bench.window_rate(step, 8, 0.01) > 0
 

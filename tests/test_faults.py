@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import hashlib
 import math
 import os
 import re
@@ -19,12 +18,12 @@ import torch
 from hydra import compose, initialize_config_dir
 from tiny import DRIFT_TASK, compose_train
 
-from flownav.builders import ConfigError
 from flownav.checkpoint import load_checkpoint, save_policy_checkpoint
 from flownav.envs import NavigationEnv, RegionTask
 from flownav.envs.reward import RewardConfig
-from flownav.errors import NonFiniteError
+from flownav.errors import ConfigError, NonFiniteError
 from flownav.flows import Box, FunctionFlow, UniformFlow
+from flownav.provenance import tree_digest
 
 ROOT = Path(__file__).resolve().parents[1]
 CONF = str(ROOT / "conf")
@@ -47,16 +46,6 @@ PPO_TINY = [
     "checkpoint_every=1",
     *QUIET,
 ]
-
-
-def tree_digest(*paths: Path) -> dict:
-    """sha256 of every file under the given paths (what must stay byte-identical)."""
-    out = {}
-    for root in paths:
-        for f in sorted([root] if root.is_file() else root.rglob("*")):
-            if f.is_file():
-                out[str(f)] = hashlib.sha256(f.read_bytes()).hexdigest()
-    return out
 
 
 SHIPPED = (ROOT / "checkpoints", ROOT / "results", ROOT / "REPORT.md")

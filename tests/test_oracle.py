@@ -2,6 +2,7 @@
 
 import pytest
 import torch
+from load import load_module
 
 from flownav.envs import ListTask, NavigationEnv, RegionTask
 from flownav.evaluation.metrics import summarize
@@ -56,3 +57,23 @@ def test_oracle_settings_are_checked():
         OracleSettings(candidates=4, elites=8)
     with pytest.raises(ValueError, match="replan_every <= horizon"):
         OracleSettings(horizon=4, replan_every=5, blocks=2)
+
+
+def test_the_settings_script_runs_the_suites_abc_tests():
+    """scripts/oracle_settings.py measures on the suite's ABC tests: the same flow, task and env configs."""
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    from flownav.evaluation.experiments import Suite
+    from flownav.paths import REPO_ROOT
+
+    script = load_module("scripts/oracle_settings.py")
+    for test, experiment in (("as_posed", "paper_abc"), ("periodic", "abc_periodic")):
+        with initialize_config_dir(config_dir=str(REPO_ROOT / "conf" / "evaluate"), version_base="1.3"):
+            cfg = compose("config", overrides=[f"+experiment={experiment}"])
+        (entry,) = cfg.suite.values()
+        mine = script.abc_config(test)
+        for key in ("flow", "task"):
+            assert OmegaConf.to_container(mine[key]) == OmegaConf.to_container(entry[key]), (test, key)
+        suite_env = Suite(cfg, log=lambda *_: None).env_cfg(entry)
+        assert OmegaConf.to_container(mine.env) == OmegaConf.to_container(suite_env), test

@@ -6,9 +6,10 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from flownav.builders import ConfigError, build_env, build_flow, build_task
+from flownav.builders import build_env, build_flow, build_task
 from flownav.envs import ListTask, NavigationEnv, Status
 from flownav.envs.kinematics import step_reaches
+from flownav.errors import ConfigError
 from flownav.flows import ABCFlow, Box, UniformFlow
 from flownav.flows.base import make_periodic
 from flownav.paths import REPO_ROOT

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
+from tiny import STILL_WATER_TASK
 
 from flownav.checkpoint import CheckpointError, load_checkpoint, load_policy
 from flownav.envs.observations import observation_size
@@ -16,10 +17,7 @@ CONF = str(Path(__file__).resolve().parents[1] / "conf")
 
 # Still water, targets about 2 D away, short episodes: learnable in seconds.
 TINY = [
-    "flow=uniform",
-    "flow.velocity=[0.0,0.0,0.0]",
-    "task.start=[[5.0,0.0,5.0],[6.0,1.0,6.0]]",
-    "task.target=[[7.0,0.0,5.0],[8.0,1.0,6.0]]",
+    *STILL_WATER_TASK,
     "env.num_envs=256",
     "env.dt=0.5",
     "env.time_limit=15.0",
@@ -180,7 +178,7 @@ def test_resume_continues_step_optimizer_and_normalizer(tmp_path):
 
 
 def test_resume_refuses_other_view(tmp_path):
-    from flownav.builders import ConfigError
+    from flownav.errors import ConfigError
     from train import run
 
     run(make_cfg("algo.total_frames=4096", "algo.final_eval_episodes=0"), tmp_path)

@@ -3,11 +3,10 @@
 
 from __future__ import annotations
 
-import importlib.util
-
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
+from load import load_module
 
 from flownav.builders import build_flow, build_task, compose_config
 from flownav.checkpoint import save_policy_checkpoint
@@ -87,9 +86,7 @@ def test_seed_selection_runs_the_protocol(teacher, reference):
 
 
 def test_teacher_failures_runs_the_protocol(teacher, reference):
-    spec = importlib.util.spec_from_file_location("teacher_failures", REPO_ROOT / "scripts" / "teacher_failures.py")
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
+    script = load_module("scripts/teacher_failures.py")
     ep, _ = script.episodes(teacher, [f"time_limit={LIMIT}"], EPISODES)
     assert torch.equal(ep.status, reference.episodes.status) and torch.equal(ep.start, reference.episodes.start)
 

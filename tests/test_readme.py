@@ -4,7 +4,6 @@ import re
 
 import pytest
 
-from flownav.evaluation.metrics import summarize
 from flownav.paths import REPO_ROOT
 
 
@@ -32,17 +31,17 @@ def test_bring_your_own_flow_snippet_runs_and_succeeds_as_stated(monkeypatch):
     monkeypatch.chdir(REPO_ROOT)
     namespace: dict = {}
     exec(compile(blocks[0], "README.md", "exec"), namespace)  # noqa: S102 - our own README
-    episodes = namespace["episodes"]
-    assert len(episodes) == 1000
-    rate = summarize(episodes.status, episodes.time)["success_rate"]
+    summary = namespace["result"].summary
+    assert summary["episodes"] == 1000
+    rate = summary["success_rate"]
     assert lo <= rate <= hi, f"the README example succeeds in {rate:.1%}, outside its stated [{lo:.1%}, {hi:.1%}]"
 
 
 def test_netcdf_snippet_runs_and_the_student_reaches_the_target(monkeypatch, tmp_path):
     (tmp_path / "checkpoints").symlink_to(REPO_ROOT / "checkpoints")  # it writes current.nc where it runs
-    episodes = run_block("load_xarray_flow", tmp_path, monkeypatch)["episodes"]
-    assert len(episodes) == 200
-    assert summarize(episodes.status, episodes.time)["success_rate"] >= 0.95  # the README: 199 of 200
+    summary = run_block("load_xarray_flow", tmp_path, monkeypatch)["result"].summary
+    assert summary["episodes"] == 200
+    assert summary["success_rate"] >= 0.95  # the README: 199 of 200
 
 
 @pytest.mark.slow

@@ -117,7 +117,7 @@ def test_unknown_key_fails_on_the_command_line():
     ],
 )
 def test_bad_value_fails_at_start(override, match, tmp_path):
-    from flownav.builders import ConfigError
+    from flownav.errors import ConfigError
     from train import run
 
     cfg = cfg_of("+experiment=teacher", "flow=uniform", "logger=csv", override)
@@ -126,7 +126,7 @@ def test_bad_value_fails_at_start(override, match, tmp_path):
 
 
 def test_resume_of_missing_run_fails(tmp_path):
-    from flownav.builders import ConfigError
+    from flownav.errors import ConfigError
     from train import run
 
     cfg = cfg_of("+experiment=teacher", "flow=uniform", "logger=csv", f"resume={tmp_path / 'nope'}")

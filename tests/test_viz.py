@@ -223,3 +223,17 @@ def test_success_maps_come_in_a_grid_with_labelled_axes_and_colorbars(tmp_path, 
     assert (fig._supxlabel.get_text(), fig._supylabel.get_text()) == ("x / D", "y / D")
     bars = {cb.get_ylabel().split(" at ")[0] for cb in colorbars}
     assert bars == {"success rate (pooled over z)", r"$\omega_z D / U$"}
+
+
+def test_abc_and_misalignment_panels_draw_every_episode_and_count_the_arrivals(tmp_path, saved_figures):
+    from flownav.viz.trajectories import plot_abc, plot_misaligned
+
+    both = {k: torch.cat((RUNS["teacher"][k], RUNS["student"][k])) for k in ("position", "alive", "status", "target")}
+    both["t0"] = torch.tensor([0.0, 0.0])
+    plot_abc({"teacher": both}, FLOW, tmp_path / "abc.png")
+    plot_misaligned({("teacher", 0.0): both, ("teacher", 90.0): both}, FLOW, tmp_path / "mis.png")
+    abc, mis = saved_figures
+    xy, xz = abc.axes[:2]
+    assert xy.get_title().startswith("teacher: 1/2 reached") and xz.get_title() == "teacher (x-z)"
+    assert [line.get_linestyle() for line in xz.get_lines()] == ["-", "None", "None", "--", "None", "None"]
+    assert [ax.get_title() for ax in mis.axes] == ["teacher, 0 deg: 1/2", "teacher, 90 deg: 1/2"]

@@ -127,7 +127,7 @@ def simulate(
         checkpoint_every_s=checkpoint_every_s,
         desc=f"cylinder Re={cfg.sim.re:g}",
     )
-    (run_dir / "config.json").write_text(config)
+    atomic_write_text(run_dir / "config.json", config)
     return sim, state
 
 

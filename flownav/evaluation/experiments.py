@@ -19,13 +19,13 @@ from pathlib import Path
 from omegaconf import DictConfig, OmegaConf
 
 from flownav.builders import build_flow, build_task
-from flownav.checkpoint import CheckpointError, load_policy
+from flownav.checkpoint import load_policy
+from flownav.errors import CheckpointError, DataError
 from flownav.evaluation.kinds import kind
 from flownav.evaluation.protocol import EVAL_SEED, EvalSpec, Evaluation, evaluate
 from flownav.evaluation.registry import Missing
 from flownav.evaluation.scripted import SCRIPTED
 from flownav.evaluation.tables import log_line
-from flownav.flows.grid import GridFlowError
 from flownav.paths import resolve
 from flownav.provenance import sha256
 
@@ -63,7 +63,7 @@ class Suite:
         if key not in self._flows:
             try:
                 self._flows[key] = build_flow(flow_cfg, device=self.device)
-            except GridFlowError as e:
+            except DataError as e:
                 raise Missing(f"missing flow dataset: {e}") from e
         return self._flows[key]
 

@@ -84,6 +84,7 @@ class FlowFamily(FlowField):
         self.bounds = bounds
         self.num_slots = 0
         self.params: dict[str, Tensor] = {}
+        self.members: list[FlowFamily] = []  # a family of families (mixture, sum): each member has the slots too
 
     # ---- what the environment calls
     def bind(self, num_slots: int, device="cpu") -> FlowFamily:
@@ -96,23 +97,30 @@ class FlowFamily(FlowField):
     def allocate(self, num_slots: int, device="cpu") -> None:
         """Room for ``num_slots`` flows, filled with a fixed draw (the env resamples every slot at reset)."""
         self.num_slots = int(num_slots)
+        self.members = [m.bind(num_slots, device) for m in self.members]
         self.params = self.draw(self.num_slots, torch.Generator(device=device).manual_seed(0), device)
 
     def resample(self, idx: Tensor, generator: torch.Generator) -> None:
-        """New flows for the slots ``idx``."""
+        """New flows for the slots ``idx``: this family's parameters, then each member's."""
         if not self.num_slots:
             raise RuntimeError("allocate(num_slots) the flow family before resampling it")
         for key, value in self.draw(idx.numel(), generator, idx.device).items():
             self.params[key][idx] = value
+        for m in self.members:
+            m.resample(idx, generator)
+
+    def to(self, device):
+        self.members = [m.to(device) for m in self.members]
+        return self
 
     def state_dict(self) -> dict:
         """Every slot's parameters (and its members'): what an exactly resumed env needs."""
-        members = [m.state_dict() for m in getattr(self, "members", ())]
+        members = [m.state_dict() for m in self.members]
         return {"params": {k: v.clone() for k, v in self.params.items()}, "members": members}
 
     def load_state_dict(self, state: dict) -> None:
         self.params = {k: v.to(self.params[k].device).clone() for k, v in state["params"].items()}
-        for m, s in zip(getattr(self, "members", ()), state["members"], strict=True):
+        for m, s in zip(self.members, state["members"], strict=True):
             m.load_state_dict(s)
 
     def velocity(self, pos: Tensor, t: Tensor, idx: Tensor | None = None) -> Tensor:
@@ -307,19 +315,6 @@ class MixtureFamily(FlowFamily):
         self.weights = torch.tensor([float(w) for w in weights])
         self.max_speed = max(m.max_speed for m in self.members)
 
-    def to(self, device):
-        self.members = [m.to(device) for m in self.members]
-        return self
-
-    def allocate(self, num_slots, device="cpu"):
-        self.members = [m.bind(num_slots, device) for m in self.members]
-        super().allocate(num_slots, device)
-
-    def resample(self, idx, generator):
-        super().resample(idx, generator)
-        for m in self.members:
-            m.resample(idx, generator)
-
     def draw(self, n, generator, device):
         return {"member": torch.multinomial(self.weights.to(device), n, replacement=True, generator=generator)}
 
@@ -354,17 +349,8 @@ class SumFamily(FlowFamily):
         self.members = list(members)
         self.max_speed = sum(m.max_speed for m in self.members)
 
-    def to(self, device):
-        self.members = [m.to(device) for m in self.members]
-        return self
-
-    def allocate(self, num_slots, device="cpu"):
-        self.num_slots = int(num_slots)
-        self.members = [m.bind(num_slots, device) for m in self.members]
-
-    def resample(self, idx, generator):
-        for m in self.members:
-            m.resample(idx, generator)
+    def draw(self, n, generator, device):
+        return {}  # nothing of its own: each member draws its flow
 
     def velocity(self, pos, t, idx=None):
         return sum(m.velocity(pos, t, idx) for m in self.members)

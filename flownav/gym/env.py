@@ -33,9 +33,10 @@ from gymnasium.vector.utils import batch_space
 from omegaconf import OmegaConf
 from tensordict import TensorDict, TensorDictBase
 
-from flownav.builders import ConfigError, build_env, build_flow, build_task
+from flownav.builders import build_env, build_flow, build_task
 from flownav.envs.navigation import NavigationEnv, Status
 from flownav.envs.observations import observation_size
+from flownav.errors import ConfigError
 from flownav.paths import REPO_ROOT
 
 CONF_DIR = REPO_ROOT / "conf"

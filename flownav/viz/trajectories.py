@@ -64,6 +64,21 @@ def _line_style(i: int, n: int, ok: bool) -> dict:
     }
 
 
+def _draw_episodes(traj, panels) -> int:
+    """Each recorded episode of ``traj`` on every ``(axes, (u, v))`` panel, one colour per episode: its path (solid:
+    reached the target, dashed: failed), start and target. Returns how many reached the target."""
+    wins = 0
+    for i in range(traj["position"].shape[0]):
+        p, tg = _path(traj, i), traj["target"][i].numpy()
+        ok = int(traj["status"][i]) == Status.SUCCESS
+        wins += ok
+        for a, (u, v) in panels:
+            a.plot(p[:, u], p[:, v], "-" if ok else "--", color=f"C{i}", lw=1.2)
+            a.plot(p[0, u], p[0, v], "o", color=f"C{i}", ms=3)
+            a.plot(tg[u], tg[v], "*", color=f"C{i}", ms=9, mec="k")
+    return wins
+
+
 def style_legend_handles() -> list:
     """Legend entries for what line styles and markers mean (the policies have their own entries)."""
     from matplotlib.lines import Line2D
@@ -206,15 +221,7 @@ def plot_misaligned(runs: dict, flow, out: Path) -> str:
             for ob in getattr(flow, "obstacles", ()):
                 cen = rotate_z(torch.tensor([[*ob.center, 0.0]]), math.radians(angle), (0.0, 0.0))[0]
                 ax.add_patch(plt.Circle((float(cen[0]), float(cen[1])), ob.radius, color="0.3"))
-            wins = 0
-            for i in range(traj["position"].shape[0]):
-                p = _path(traj, i)
-                ok = int(traj["status"][i]) == Status.SUCCESS
-                wins += ok
-                ax.plot(p[:, 0], p[:, 1], "-" if ok else "--", color=f"C{i}", lw=1.2)
-                ax.plot(p[0, 0], p[0, 1], "o", color=f"C{i}", ms=3)
-                tg = traj["target"][i].numpy()
-                ax.plot(tg[0], tg[1], "*", color=f"C{i}", ms=9, mec="k")
+            wins = _draw_episodes(traj, [(ax, (0, 1))])
             ax.set_xlim(lo[0], hi[0])
             ax.set_ylim(lo[1], hi[1])
             ax.set_aspect("equal")
@@ -244,16 +251,7 @@ def plot_abc(runs: dict, flow, out: Path) -> str:
         traj = runs[pol]
         ax, axz = axes[r]
         bg = ax.contourf(X, Y, speed, levels=20, cmap="Greys", alpha=0.6)
-        wins = 0
-        for i in range(traj["position"].shape[0]):
-            p = _path(traj, i)
-            ok = int(traj["status"][i]) == Status.SUCCESS
-            wins += ok
-            for a, (u, v) in ((ax, (0, 1)), (axz, (0, 2))):
-                a.plot(p[:, u], p[:, v], "-" if ok else "--", color=f"C{i}", lw=1.2)
-                a.plot(p[0, u], p[0, v], "o", color=f"C{i}", ms=3)
-                tg = traj["target"][i].numpy()
-                a.plot(tg[u], tg[v], "*", color=f"C{i}", ms=9, mec="k")
+        wins = _draw_episodes(traj, [(ax, (0, 1)), (axz, (0, 2))])
         ax.set_title(f"{pol}: {wins}/{traj['position'].shape[0]} reached (x-y, speed at z={z:.2f})", fontsize=9)
         axz.set_title(f"{pol} (x-z)", fontsize=9)
         ax.set_xlim(b.lo[0], b.hi[0])
