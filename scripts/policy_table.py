@@ -1,0 +1,65 @@
+"""The README's first table ("Which policy to use"), printed from the shipped results: the generalisation suite
+(results/generalization.json) and the paper's training task (results/paper.json, experiment ``training``).
+
+    python scripts/policy_table.py
+"""
+
+from __future__ import annotations
+
+import json
+
+from flownav.paths import REPO_ROOT
+
+POLICIES = [
+    "head_to_target",
+    "oracle",
+    "teacher",
+    "student",
+    "student_robust",
+    "generalist_student",
+    "generalist_student_mem",
+]
+ANALYTIC = ["taylor_green", "double_gyre", "burgers_vortex", "stuart_vortex_row", "vortex_tubes", "poiseuille_channel",
+            "beltrami_shell_s1000", "beltrami_shell_s1001"]  # fmt: skip
+NAMES = {
+    "generalist_student": "generalist_student (`ego`)",
+    "generalist_student_mem": "generalist_student_mem (`ego_mem`)",
+}
+
+
+def pct(x: float | None) -> str:
+    return "-" if x is None else f"{100 * x:.1f}".removesuffix(".0")
+
+
+def main() -> None:
+    gen = json.loads((REPO_ROOT / "results" / "generalization.json").read_text())
+    paper = json.loads((REPO_ROOT / "results" / "paper.json").read_text())["experiments"]["training"]
+    cases, held = gen["results"], gen["summary"]["held_out"]
+
+    def rate(case: str, policy: str) -> float | None:
+        row = cases[case].get(policy)
+        return row["success_rate"] if isinstance(row, dict) and "success_rate" in row else None
+
+    def training(policy: str) -> float | None:
+        row = paper["results"].get(policy) if "results" in paper else None
+        return row["success_rate"] if isinstance(row, dict) and "success_rate" in row else None
+
+    header = ["policy", "paper's task (wake)", "still water", "uniform 0.5", "headwind 0.5",
+              "8 held-out analytic flows (mean)", "turned wakes (135, 180)", "extended domain",
+              "mean fraction of the oracle, 11 held-out cases", "beats head-to-target (held-out)"]  # fmt: skip
+    print("| " + " | ".join(header) + " |")
+    print("|" + "---|" * len(header))
+    for p in POLICIES:
+        analytic = [rate(c, p) for c in ANALYTIC]
+        mean = sum(analytic) / len(analytic) if None not in analytic else None
+        s = held[p]
+        beats = "-" if p in ("head_to_target", "oracle") else f"{s['beats_head_to_target']} of {s['cases']}"
+        turned = f"{pct(rate('wake_turned_135', p))}, {pct(rate('wake_turned_180', p))}"
+        cells = [pct(training(p)), pct(rate("still_water", p)), pct(rate("uniform_x_0.5", p)),
+                 pct(rate("headwind_0.5", p)), pct(mean), turned, pct(rate("extended", p)),
+                 f"{100 * s['mean_fraction_of_oracle']:.0f}%", beats]  # fmt: skip
+        print(f"| {NAMES.get(p, p)} | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main()
