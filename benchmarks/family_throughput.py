@@ -4,7 +4,7 @@ and the generalist's training cost (wall time of finished runs).
 Run: ``python benchmarks/family_throughput.py [--threads 1] [--batch 4096] [--seconds 4]``. Writes
 ``benchmarks/results/family_throughput.json``. ``python benchmarks/family_throughput.py --cost
 teacher=<run dir> --cost student=<run dir> ...`` writes the training runs' wall times (their
-``final_metrics.json``) to ``benchmarks/results/generalist_cost.json`` instead.
+``final_metrics.json``) to ``benchmarks/results/generalist_cost.json`` (``--cost-file NAME``: NAME.json) instead.
 
 Every case steps ``NavigationEnv.step_and_maybe_reset`` with random actions (resets included) on the flow
 config ``conf/flow/<name>.yaml`` and the task the generalist trains on (``task=family``; the wake alone:
@@ -74,6 +74,7 @@ def main():
     parser.add_argument("--rounds", type=int, default=4)
     parser.add_argument("--flows", nargs="+", default=list(FLOWS))
     parser.add_argument("--cost", action="append", default=[], help="name=<run dir> of a finished training run")
+    parser.add_argument("--cost-file", default="generalist_cost", help="benchmarks/results/<this>.json for --cost")
     args = parser.parse_args()
     if args.cost:
         payload = {
@@ -84,7 +85,7 @@ def main():
             "targets_min": {"teacher": 60, "student": 20},
         }
         payload["headline"] = payload["results"][0]
-        write_result("generalist_cost", payload)
+        write_result(args.cost_file, payload)
         return
     torch.set_num_threads(args.threads)
     cases = {(f, v): make_stepper(f, views, args.batch) for f in args.flows for v, views in VIEWS.items()}
