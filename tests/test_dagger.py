@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+from collections.abc import Mapping
 from pathlib import Path
 
 import pytest
@@ -69,8 +70,23 @@ def test_every_student_imitates_a_teacher_trained_on_its_flow_and_task():
     for name, cfg in students.items():
         teacher = makers.get(cfg.teacher_checkpoint, Path(cfg.teacher_checkpoint).stem)  # selection ships by name
         assert teacher in cfgs and cfgs[teacher].algo.name == "ppo", f"{name}: {cfg.teacher_checkpoint}"
-        assert cfgs[teacher].flow == cfg.flow and cfgs[teacher].task == cfg.task, f"{name} vs {teacher}"
+        if cfg.algo.get("scene_expert"):  # a routed teacher: the same families, weighted towards the paper's task
+            assert unweighted(cfgs[teacher].flow) == unweighted(cfg.flow), f"{name} vs {teacher}"
+            assert unweighted(cfgs[teacher].task) == unweighted(cfg.task), f"{name} vs {teacher}"
+            maker = makers.get(cfg.algo.scene_expert, Path(cfg.algo.scene_expert).stem)
+            expert = cfgs[maker]  # the paper's teacher, made in the paper's scene
+            assert (expert.flow.type, expert.task.type, expert.obs.view) == ("grid", "regions", "geo_sincos"), name
+        else:
+            assert cfgs[teacher].flow == cfg.flow and cfgs[teacher].task == cfg.task, f"{name} vs {teacher}"
         assert cfgs[teacher].obs.view != cfg.obs.view and cfg.algo.beta.initial == 0.0, name
+
+
+def unweighted(cfg) -> dict:
+    """A flow or task config without what only weights its draws (member weights, shares)."""
+    drop = ("weight", "regions_share", "posed_wake_regions_share", "full_speed_share")
+    if not isinstance(cfg, Mapping):
+        return cfg
+    return {k: unweighted(v) for k, v in cfg.items() if k not in drop}
 
 
 def test_beta_schedule_and_loss():
