@@ -73,3 +73,15 @@ def test_the_tests_the_docs_name_exist():
         if not path.is_file() or (test and not re.search(rf"^def {test}\(", path.read_text(), flags=re.M)):
             missing.append(f"tests/{file}" + (f"::{test}" if test else ""))
     assert not missing, f"the docs name tests that do not exist: {missing}"
+
+
+def test_the_policy_table_is_what_scripts_policy_table_prints(capsys):
+    """The README's first table is the output of python scripts/policy_table.py on the shipped results."""
+    from load import load_module
+
+    load_module("scripts/policy_table.py").main()
+    table = capsys.readouterr().out.strip().splitlines()
+    assert len(table) == 2 + 7
+    lines = readme_text().splitlines()
+    start = lines.index(table[0])
+    assert lines[start : start + len(table)] == table
