@@ -17,8 +17,8 @@ POLICIES = {
     "teacher": "teacher (paper)",
     "student": "student (paper)",
     "student_robust": "student_robust",
-    "generalist_student": "generalist_student (`ego`)",
-    "generalist_student_mem": "**generalist_student_mem** (`ego_mem`)",
+    "generalist_student_ego": "generalist_student_ego (`ego`)",
+    "generalist_student": "**generalist_student** (`ego_mem`)",
 }
 
 

@@ -250,7 +250,7 @@ def test_a_generalist_student_imitates_a_privileged_teacher(tmp_path):
             "algo.updates_per_iteration=2", "algo.batch_size=32", "algo.hidden=[8]", "algo.final_eval_episodes=0",
             "logger=csv", "logger.progress=false", "threads=1", f"teacher_checkpoint={teacher}"]  # fmt: skip
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
-        cfg = compose("config", overrides=["+experiment=generalist_student_mem", *tiny])
+        cfg = compose("config", overrides=["+experiment=generalist_student", *tiny])
     final = train.run(cfg, tmp_path / "run")
     assert final["frames"] == 160
     _, payload = load_policy(tmp_path / "run" / "checkpoints" / "last.pt", expect_obs="ego_mem")

@@ -476,11 +476,11 @@ def test_no_command_line_default_writes_into_a_shipped_place():
 
 
 def test_the_budget_to_ship_includes_the_experiments_an_experiment_builds_on():
-    """generalist_student_mem builds on generalist_student (whose DAgger budget differs from student's): shipping
+    """generalist_student_ego builds on generalist_student (whose DAgger budget differs from student's): shipping
     checks a run against the composed budget, not against the algo group's defaults."""
     from flownav.shipping import experiment_budget
 
-    mem = experiment_budget("generalist_student_mem", "dagger")
+    ego = experiment_budget("generalist_student_ego", "dagger")
     parent = experiment_budget("generalist_student", "dagger")
-    assert mem == parent
+    assert ego == parent
     assert parent != experiment_budget("student_mem", "dagger")
