@@ -10,6 +10,7 @@ from flownav.evaluation.oracle import Oracle, OracleSettings
 from flownav.evaluation.rollout import run_episodes
 from flownav.evaluation.scripted import SCRIPTED, HeadToTarget
 from flownav.flows import Box, FunctionFlow, UniformFlow
+from flownav.flows.families import MixtureFamily, UniformFamily
 
 SMALL = dict(candidates=32, horizon=40, iterations=2, elites=4)
 
@@ -24,6 +25,16 @@ def success(policy, flow, task, episodes, **env_kw):
 def test_the_oracle_reaches_every_target_in_still_water_and_a_uniform_current(velocity):
     flow = UniformFlow(velocity, bounds=Box((-4.0, -7.0, 0.0), (22.0, 7.0, 10.0)))
     s = success(Oracle(**SMALL), flow, RegionTask(), 16, time_limit=30.0)
+    assert s["success_rate"] == 1.0
+
+
+def test_the_oracle_plans_in_each_swimmers_own_flow_of_a_family():
+    """A mixture of two current families: every swimmer of the batch drifts in its own current, and the oracle's
+    simulated candidates (many rows per swimmer) look up their swimmer's flow and obstacles."""
+    box = Box((-4.0, -7.0, 0.0), (22.0, 7.0, 10.0))
+    members = [UniformFamily((0.3, 0.5), horizontal=True, bounds=box), UniformFamily((0.0, 0.2), bounds=box)]
+    family = MixtureFamily(members, [0.5, 0.5], bounds=box)
+    s = success(Oracle(**SMALL), family, RegionTask(), 16, time_limit=30.0)
     assert s["success_rate"] == 1.0
 
 

@@ -187,6 +187,11 @@ def flow_at(flow: FlowField, settings: Settings, strength: Tensor, pos: Tensor, 
     return u * s[:, None]
 
 
+def in_obstacle(flow: FlowField, pos: Tensor, idx: Tensor | None = None) -> Tensor:
+    """Rows of ``pos`` inside an obstacle; a family needs the env slot of each row (``idx``)."""
+    return flow.in_obstacle(pos, idx) if isinstance(flow, FlowFamily) else flow.in_obstacle(pos)
+
+
 def sample_episodes(n: int, flow: FlowField, settings: Settings, rng: torch.Generator, idx=None) -> Episodes:
     """Starts, targets, headings, flow start times and strengths of n new episodes (for the slots ``idx`` of a
     family flow), drawn from ``rng`` in a fixed order: the task (rejected starts drawn again), theta, psi, t0
@@ -206,7 +211,7 @@ def sample_episodes(n: int, flow: FlowField, settings: Settings, rng: torch.Gene
     for _ in range(100):
         bad = (
             ~base.in_domain(start)
-            | (base.in_obstacle(start, idx) if family else base.in_obstacle(start))
+            | in_obstacle(base, start, idx)
             | (base.displacement(start, target).norm(dim=-1) <= settings.reward.success_radius)
         )
         if not bad.any():

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from flownav.envs.core import in_obstacle
 from flownav.envs.kinematics import heading_vector, move, step_reaches, turn, wrap_angle
 from flownav.envs.navigation import DPSI_MAX, DTHETA_MAX, NavigationEnv
 
@@ -164,7 +165,7 @@ class Oracle:
             reached = live & step_reaches(env.flow.displacement(pos, target), new - pos, radius)
             pos = torch.where(live[:, None], env.flow.wrap(new), pos)
             flow_vel = env._flow_at(pos, t0 + (steps0 + h + 1) * env.dt, rep)
-            out = live & ~reached & (~env.flow.in_domain(pos) | env.flow.in_obstacle(pos))
+            out = live & ~reached & (~env.flow.in_domain(pos) | in_obstacle(env.flow, pos, rep))
             t = (h + 1) * env.dt
             cost = torch.where(reached, t - s.reach_bonus, cost)
             cost = torch.where(out, s.leave_penalty - t, cost)
