@@ -321,7 +321,6 @@ DAGGER = {
     "batch_size": Int(ge=1),
     "updates_per_iteration": Int(ge=1),
     "lr": Float(gt=0),
-    "anneal_lr": Bool(),
     "weight_decay": Float(ge=0),
     "grad_clip": Float(ge=0),
     "hidden": Key(INTS, ge=1),

@@ -13,7 +13,7 @@ import torch
 from hydra import compose, initialize_config_dir
 from tiny import DRIFT_TASK
 
-from flownav.algorithms.dagger import beta_at, imitation_loss, lr_at
+from flownav.algorithms.dagger import beta_at, imitation_loss
 from flownav.checkpoint import CheckpointError, load_checkpoint, load_policy, save_policy_checkpoint
 from flownav.evaluation.scripted import HeadToTarget, fit_expert
 
@@ -95,10 +95,6 @@ def test_beta_schedule_and_loss():
             initial, decay = 1.0, 0.5
 
     assert [beta_at(A, i) for i in range(3)] == [1.0, 0.5, 0.25]
-    A.lr, A.iterations, A.anneal_lr = 1e-3, 4, True
-    assert [lr_at(A, i) for i in range(4)] == pytest.approx([1e-3, 7.5e-4, 5e-4, 2.5e-4])
-    A.anneal_lr = False
-    assert [lr_at(A, i) for i in range(4)] == [1e-3] * 4
     pred, target = torch.zeros(4, 3), torch.ones(4, 3)
     assert float(imitation_loss(pred, target)) == pytest.approx(3.0)  # eq. 9 sums over the 3 action components
 
@@ -143,17 +139,6 @@ def test_resume_continues_exactly(teacher_ckpt, tmp_path):
     pa = load_checkpoint(tmp_path / "straight" / "checkpoints" / "last.pt")["policy"]["state_dict"]
     pb = load_checkpoint(tmp_path / "part" / "checkpoints" / "last.pt")["policy"]["state_dict"]
     assert all(torch.allclose(pa[k], pb[k]) for k in pa)
-    optim = load_checkpoint(tmp_path / "straight" / "checkpoints" / "last.pt")["train_state"]["optimizer"]
-    assert optim["param_groups"][0]["lr"] == pytest.approx(3e-3)  # anneal_lr=false: constant
-
-
-def test_annealed_learning_rate_reaches_lr_over_iterations_in_the_last_fit(teacher_ckpt, tmp_path):
-    import train
-
-    quick = ["algo.updates_per_iteration=10", "algo.steps_per_iteration=20", "algo.final_eval_episodes=0"]
-    train.run(make_cfg(teacher_ckpt, *quick, "algo.iterations=3", "algo.anneal_lr=true"), tmp_path / "run")
-    optim = load_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt")["train_state"]["optimizer"]
-    assert optim["param_groups"][0]["lr"] == pytest.approx(3e-3 / 3)
 
 
 def test_teacher_of_the_wrong_view_is_refused(tmp_path):

@@ -92,14 +92,6 @@ def beta_at(a, iteration: int) -> float:
     return float(a.beta.initial) * float(a.beta.decay) ** iteration
 
 
-def lr_at(a, iteration: int) -> float:
-    """Adam's learning rate for the fit of iteration ``iteration`` (0-based): ``lr``, or with ``anneal_lr`` decayed
-    linearly towards 0 over ``iterations`` (lr / iterations in the last fit), so the last fits settle the student
-    on the aggregated data instead of moving it: the final iterate is what ships."""
-    lr = float(a.lr)
-    return lr * (1.0 - iteration / int(a.iterations)) if a.anneal_lr else lr
-
-
 def set_normalizer_from(policy: DeterministicPolicy, obs: torch.Tensor) -> None:
     """Normaliser statistics = mean and variance of all aggregated observations."""
     norm = policy.normalizer
@@ -236,8 +228,6 @@ def train(cfg, run_dir) -> dict:
         set_normalizer_from(student, buffer[:]["obs"])
         # 4. fit eq. 9
         student.train()
-        for g in optim.param_groups:
-            g["lr"] = lr_at(a, iteration)
         total = 0.0
         for _ in range(updates):
             sample = buffer.sample()
