@@ -17,7 +17,6 @@ POLICIES = {
     "teacher": "teacher (paper)",
     "student": "student (paper)",
     "student_robust": "student_robust",
-    "generalist_student_ego": "generalist_student_ego (`ego`)",
     "generalist_student": "**generalist_student** (`ego_mem`)",
 }
 

@@ -14,7 +14,6 @@ POLICY_COLORS = {
     "student_robust": "tab:purple",
     "student_mem_robust": "tab:brown",
     "generalist_teacher": "navy",
-    "generalist_student_ego": "teal",
     "generalist_student": "magenta",
     "head_to_target": "tab:pink",
     "passive": "black",
