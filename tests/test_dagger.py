@@ -83,7 +83,7 @@ def test_every_student_imitates_a_teacher_trained_on_its_flow_and_task():
 
 def unweighted(cfg) -> dict:
     """A flow or task config without what only weights its draws (member weights, shares)."""
-    drop = ("weight", "regions_share", "posed_wake_regions_share", "full_speed_share")
+    drop = ("weight", "regions_share", "posed_wake_regions_share", "posed_wake_any_start_share", "full_speed_share")
     if not isinstance(cfg, Mapping):
         return cfg
     return {k: unweighted(v) for k, v in cfg.items() if k not in drop}

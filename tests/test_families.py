@@ -175,6 +175,23 @@ def test_family_task_distances_directions_and_regions():
         FamilyTask(WAKE_BOUNDS, distance=(30.0, 40.0))
 
 
+def test_posed_wake_any_start_share_moves_only_the_posed_wakes_starts():
+    """In the wake as posed, the paper's target with a start anywhere in that share; elsewhere nothing changes."""
+    task = FamilyTask(WAKE_BOUNDS, regions_share=0.0, posed_wake_regions_share=1.0, posed_wake_any_start_share=0.4)
+    n = 20_000
+    posed = torch.arange(n) % 2 == 0
+    start, target = task.sample(n, torch.Generator().manual_seed(0), posed=posed)
+    assert REGION_2.contains(target[posed]).all()
+    in_region_1 = REGION_1.contains(start[posed])
+    assert (~in_region_1).float().mean() == pytest.approx(0.4, abs=0.02)  # Region 1 is a small share of the box
+    assert task.box.contains(start[posed]).all()
+    same = FamilyTask(WAKE_BOUNDS, regions_share=0.0, posed_wake_regions_share=1.0)
+    plain = same.sample(n, torch.Generator().manual_seed(0), posed=posed)
+    assert torch.equal(plain[0][~posed], start[~posed]) and torch.equal(plain[1], target)
+    with pytest.raises(ValueError, match="posed_wake_any_start_share is a fraction"):
+        FamilyTask(WAKE_BOUNDS, posed_wake_any_start_share=1.5)
+
+
 def test_swim_speed_factor_range_and_the_env_applies_it():
     task = FamilyTask(WAKE_BOUNDS, swim_speed=(0.05, 1.0), full_speed_share=0.25)
     s = task.swim_speed(40_000, torch.Generator().manual_seed(0))

@@ -111,7 +111,8 @@ class FamilyTask:
     * With probability ``regions_share``: start in ``start_region``, target in ``target_region`` (the paper's).
       For slots whose flow is the wake as posed (``posed``, passed by the env), with probability
       ``posed_wake_regions_share`` instead (when set): the paper's task in the paper's flow, seen more often
-      without posing it in every other flow.
+      without posing it in every other flow. Of those, with probability ``posed_wake_any_start_share`` the start is
+      drawn anywhere in the domain instead of in Region 1 (the extended domain of the paper's Fig. 4).
     * Otherwise: start uniform in ``domain`` shrunk by ``margin`` on every side, target at a distance uniform in
       ``distance`` in a direction uniform on the sphere, drawn again until it lies in the shrunk domain too.
     * :meth:`swim_speed`: the swimmer's speed factor (on ``env.swim_speed_scale``), 1 with probability
@@ -130,6 +131,7 @@ class FamilyTask:
         swim_speed: Sequence[float] = (0.05, 1.0),
         full_speed_share: float = 0.5,
         posed_wake_regions_share: float | None = None,
+        posed_wake_any_start_share: float = 0.0,
     ):
         self.distance = tuple(float(d) for d in distance)
         self.swim_range = tuple(float(s) for s in swim_speed)
@@ -137,7 +139,11 @@ class FamilyTask:
             raise ValueError(f"distance must be [low, high] with 0 < low <= high, got {list(distance)}")
         if len(self.swim_range) != 2 or not 0 < self.swim_range[0] <= self.swim_range[1]:
             raise ValueError(f"swim_speed must be [low, high] with 0 < low <= high, got {list(swim_speed)}")
-        shares = {"regions_share": regions_share, "full_speed_share": full_speed_share}
+        shares = {
+            "regions_share": regions_share,
+            "full_speed_share": full_speed_share,
+            "posed_wake_any_start_share": posed_wake_any_start_share,
+        }
         if posed_wake_regions_share is not None:
             shares["posed_wake_regions_share"] = posed_wake_regions_share
         for name, share in shares.items():
@@ -152,6 +158,7 @@ class FamilyTask:
         self.regions = RegionTask(start_region, target_region)
         self.regions_share, self.full_speed_share = float(regions_share), float(full_speed_share)
         self.posed_wake_regions_share = None if posed_wake_regions_share is None else float(posed_wake_regions_share)
+        self.posed_wake_any_start_share = float(posed_wake_any_start_share)
 
     def sample(
         self, n: int, generator: torch.Generator | None = None, device="cpu", posed: Tensor | None = None
@@ -162,6 +169,9 @@ class FamilyTask:
         if posed is not None and self.posed_wake_regions_share is not None:
             share = torch.where(posed[:, None], self.posed_wake_regions_share, share)
         paper = torch.rand(n, 1, generator=generator, device=device) < share
+        if posed is not None and self.posed_wake_any_start_share > 0:  # drawn only then: other streams unchanged
+            anywhere = torch.rand(n, 1, generator=generator, device=device) < self.posed_wake_any_start_share
+            r_start = torch.where(posed[:, None] & anywhere, start, r_start)
         return torch.where(paper, r_start, start), torch.where(paper, r_target, target)
 
     def swim_speed(self, n: int, generator: torch.Generator | None = None, device="cpu") -> Tensor:
