@@ -158,7 +158,13 @@ def build_task(cfg: Mapping, flow: FlowField):
 
     def family():
         kw = {k: cfg[k] for k in ("distance", "swim_speed") if cfg.get(k) is not None}
-        shares = ("margin", "regions_share", "full_speed_share", "posed_wake_regions_share", "posed_wake_any_start_share")
+        shares = (
+            "margin",
+            "regions_share",
+            "full_speed_share",
+            "posed_wake_regions_share",
+            "posed_wake_any_start_share",
+        )
         kw |= {k: float(cfg[k]) for k in shares if cfg.get(k) is not None}
         if cfg.get("start") is not None:
             kw |= {
