@@ -80,12 +80,29 @@ def test_scene_routing_needs_the_generalist_view_and_one_action_box():
         scene_routed(generalist, "geo_priv", other, "other.pt")
 
 
-def test_the_family_task_poses_the_papers_task_in_the_posed_wake():
+def posed_and_turned_wakes() -> MixtureFamily:
+    """Member 0: the wake as posed; member 1: the wake turned by 10-80 degrees."""
     posed = TransformedFamily([synthetic_wake()], angle_deg=(0, 0), strength=(1, 1), background=(0, 0))
     turned = TransformedFamily([synthetic_wake()], angle_deg=(10, 80), strength=(1, 1), background=(0, 0))
-    flow = MixtureFamily([posed, turned], [1.0, 1.0], WAKE_BOUNDS)
+    return MixtureFamily([posed, turned], [1.0, 1.0], WAKE_BOUNDS)
+
+
+def test_the_family_task_poses_the_papers_task_in_the_posed_wake():
+    flow = posed_and_turned_wakes()
     task = FamilyTask(WAKE_BOUNDS, regions_share=0.0, posed_wake_regions_share=1.0)
     env = NavigationEnv(flow, task, num_envs=512, views=("geo_sincos",), seed=2)
     env.reset()
     papers = REGION_1.contains(env.state.pos) & REGION_2.contains(env.state.target)
     assert 100 < papers.sum() < 412 and torch.equal(papers, env.flow.params["member"] == 0)
+
+
+def test_the_any_start_share_acts_without_the_posed_wake_regions_share():
+    """posed_wake_any_start_share moves the posed wake's starts whether or not posed_wake_regions_share is set."""
+    flow = posed_and_turned_wakes()
+    task = FamilyTask(WAKE_BOUNDS, regions_share=1.0, posed_wake_any_start_share=1.0)
+    env = NavigationEnv(flow, task, num_envs=512, views=("geo_sincos",), seed=2)
+    env.reset()
+    from_region_1 = REGION_1.contains(env.state.pos)
+    in_posed = env.flow.params["member"] == 0
+    assert REGION_2.contains(env.state.target).all() and from_region_1[~in_posed].all()
+    assert from_region_1[in_posed].float().mean() < 0.1  # Region 1 is a small share of the domain

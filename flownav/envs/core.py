@@ -199,12 +199,8 @@ def sample_episodes(n: int, flow: FlowField, settings: Settings, rng: torch.Gene
     device = rng.device
     base = flow.base if isinstance(flow, RotatedFlow) else flow
     family = isinstance(flow, FlowFamily)
-    # A family task may pose the paper's task more often where the flow is the wake as posed.
-    posed = (
-        {"posed": flow.wake_as_posed(idx)}
-        if family and getattr(settings.task, "posed_wake_regions_share", None) is not None
-        else {}
-    )
+    # A family task may treat the slots whose flow is the wake as posed apart (FamilyTask.reads_posed).
+    posed = {"posed": flow.wake_as_posed(idx)} if family and getattr(settings.task, "reads_posed", False) else {}
     start, target = settings.task.sample(n, rng, device, **posed)
     start, target = start.to(device, torch.float32), target.to(device, torch.float32)
     # Rejection in the unrotated scene: a start must lie in the domain, outside obstacles and the success ball.

@@ -160,6 +160,11 @@ class FamilyTask:
         self.posed_wake_regions_share = None if posed_wake_regions_share is None else float(posed_wake_regions_share)
         self.posed_wake_any_start_share = float(posed_wake_any_start_share)
 
+    @property
+    def reads_posed(self) -> bool:
+        """Whether :meth:`sample` treats the wake as posed apart: the env then passes ``posed``."""
+        return self.posed_wake_regions_share is not None or self.posed_wake_any_start_share > 0
+
     def sample(
         self, n: int, generator: torch.Generator | None = None, device="cpu", posed: Tensor | None = None
     ) -> tuple[Tensor, Tensor]:
