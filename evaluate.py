@@ -36,7 +36,7 @@ from flownav.builders import build_flow, build_task
 from flownav.checkpoint import load_policy
 from flownav.errors import ConfigError, reported_as_one_line
 from flownav.evaluation.protocol import EvalSpec, evaluate
-from flownav.evaluation.scripted import SCRIPTED
+from flownav.evaluation.scripted import SCRIPTED, scripted_view
 from flownav.evaluation.tables import log_line
 from flownav.paths import REPO_ROOT, resolve
 from flownav.shipping import is_shipped
@@ -56,13 +56,14 @@ def eval_spec(cfg: DictConfig) -> EvalSpec:
 
 def load_evaluated(checkpoint: str, cfg: DictConfig):
     """(policy, payload) of a checkpoint file, or of a scripted reference named ``scripted:<name>``
-    (head_to_target, passive, oracle: flownav/evaluation/scripted.py), which reads the geo view."""
+    (flownav/evaluation/scripted.py), which reads the geo view unless it names another."""
     if not checkpoint.startswith("scripted:"):
         return load_policy(resolve(checkpoint), expect_obs=cfg.get("expect_obs"), device=cfg.device)
     kind = checkpoint.split(":", 1)[1]
     if kind not in SCRIPTED:
         raise ConfigError(f"checkpoint={checkpoint} names no scripted policy; choose scripted:<{'|'.join(SCRIPTED)}>")
-    return SCRIPTED[kind](), {"obs": "geo", "role": "reference"}
+    policy = SCRIPTED[kind]()
+    return policy, {"obs": scripted_view(policy), "role": "reference"}
 
 
 def evaluate_checkpoint(cfg: DictConfig, log=print) -> dict:

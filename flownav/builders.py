@@ -166,6 +166,8 @@ def build_task(cfg: Mapping, flow: FlowField):
             "posed_wake_any_start_share",
         )
         kw |= {k: float(cfg[k]) for k in shares if cfg.get(k) is not None}
+        if cfg.get("posed_wake_any_start_box") is not None:
+            kw["posed_wake_any_start_box"] = _box(cfg["posed_wake_any_start_box"])
         if cfg.get("start") is not None:
             kw |= {
                 "start_region": _box(cfg["start"]),

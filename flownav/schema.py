@@ -258,6 +258,7 @@ TASKS = {
         "regions_share": Float(ge=0, le=1),
         "posed_wake_regions_share": Float(ge=0, le=1, null=True),
         "posed_wake_any_start_share": Float(ge=0, le=1),
+        "posed_wake_any_start_box": Key(BOX, null=True),
         "start": Key(BOX, null=True),
         "target": Key(BOX, null=True),
         "swim_speed": Key(FLOATS, size=2, gt=0),

@@ -13,7 +13,7 @@ from flownav.envs.observations import observation_size
 from flownav.envs.tasks import REGION_1, REGION_2, FamilyTask
 from flownav.errors import ConfigError
 from flownav.flows import FunctionFlow, UniformFlow
-from flownav.flows.base import WAKE_BOUNDS, Cylinder
+from flownav.flows.base import WAKE_BOUNDS, Box, Cylinder
 from flownav.flows.families import (
     FourierFamily,
     MixtureFamily,
@@ -190,6 +190,22 @@ def test_posed_wake_any_start_share_moves_only_the_posed_wakes_starts():
     assert torch.equal(plain[0][~posed], start[~posed]) and torch.equal(plain[1], target)
     with pytest.raises(ValueError, match="posed_wake_any_start_share is a fraction"):
         FamilyTask(WAKE_BOUNDS, posed_wake_any_start_share=1.5)
+
+
+def test_posed_wake_any_start_box_bounds_the_far_starts():
+    upstream = Box((-3.0, -6.0, -4.0), (4.0, 6.0, 14.0))
+    task = FamilyTask(
+        WAKE_BOUNDS,
+        regions_share=0.0,
+        posed_wake_regions_share=1.0,
+        posed_wake_any_start_share=0.5,
+        posed_wake_any_start_box=upstream,
+    )
+    posed = torch.ones(4000, dtype=torch.bool)
+    start, target = task.sample(4000, torch.Generator().manual_seed(1), posed=posed)
+    far = ~REGION_1.contains(start)
+    assert far.float().mean() == pytest.approx(0.5, abs=0.03)
+    assert upstream.contains(start[far]).all() and REGION_2.contains(target).all()
 
 
 def test_swim_speed_factor_range_and_the_env_applies_it():

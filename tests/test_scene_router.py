@@ -2,16 +2,21 @@
 
 import pytest
 import torch
+from omegaconf import OmegaConf
 
+from flownav.agents.flow_compensating import FlowCompensating
 from flownav.agents.networks import DeterministicPolicy
 from flownav.agents.scene_router import SceneRoutedTeacher, scene_routed
+from flownav.builders import build_task
 from flownav.envs import NavigationEnv
+from flownav.envs.core import UPSTREAM_X
 from flownav.envs.observations import observation_size
 from flownav.envs.tasks import REGION_1, REGION_2, FamilyTask, RegionTask
 from flownav.errors import CheckpointError
 from flownav.flows.base import WAKE_BOUNDS
 from flownav.flows.families import MixtureFamily, TransformedFamily, UniformFamily
 from flownav.flows.synthetic import synthetic_wake
+from flownav.paths import REPO_ROOT
 
 LOW, HIGH = [0.0, -0.785, -1.571], [1.0, 0.785, 1.571]
 
@@ -62,11 +67,35 @@ class Constant(torch.nn.Module):
 
 def test_the_routed_teacher_hands_the_flagged_rows_to_the_expert():
     teacher = SceneRoutedTeacher(Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9))
-    obs = torch.randn(6, 24)
-    obs[:, -1] = torch.tensor([1.0, 0.0, 1.0, 0.0, 0.0, 1.0])
+    obs = torch.randn(7, 24)
+    obs[:, -1] = torch.tensor([1.0, 0.0, 1.0, 0.0, 0.0, 1.0, 2.0])
     out = teacher(obs)
     assert torch.equal(out[obs[:, -1] == 1], torch.tensor([[0.9, -0.5, 0.0]]).expand(3, 3))
     assert torch.equal(out[obs[:, -1] == 0], torch.tensor([[0.1, 0.2, 0.3]]).expand(3, 3))
+    # code 2 (the paper's scene from upstream of its regions): the flow-compensating expert
+    assert torch.equal(out[-1], FlowCompensating()(obs[-1:, :-1])[0])
+
+
+def test_an_episode_that_starts_upstream_in_the_papers_scene_is_coded_2_all_along():
+    flow = posed_and_turned_wakes()
+    # as a training config sets it (conf/task/family.yaml plus overrides), through the schema and the builder
+    cfg = OmegaConf.load(REPO_ROOT / "conf/task/family.yaml")
+    cfg.regions_share, cfg.full_speed_share = 0.0, 1.0
+    cfg.posed_wake_regions_share, cfg.posed_wake_any_start_share = 1.0, 0.5
+    cfg.posed_wake_any_start_box = [[-3.0, -6.0, 3.0], [UPSTREAM_X, 6.0, 7.0]]
+    task = build_task(cfg, flow)
+    env = NavigationEnv(flow, task, num_envs=512, views=("geo_priv_scene",), seed=4)
+    td = env.reset()
+    in_posed = env.flow.params["member"] == 0
+    from_upstream = in_posed & (env.state.pos[:, 0] < UPSTREAM_X)
+    assert 50 < from_upstream.sum() < 200
+    expected = torch.where(from_upstream, 2.0, in_posed.float())
+    assert torch.equal(td["geo_priv_scene"][:, -1], expected)
+    for _ in range(10):  # the code follows the start, not the swimmer: swimming downstream keeps it
+        td["action"] = torch.tensor([1.0, 0.0, 0.0]).expand(512, 3)
+        td = env.step(td)["next"]
+    running = ~td["done"].reshape(-1)
+    assert torch.equal(td["geo_priv_scene"][running, -1], expected[running])
 
 
 def test_scene_routing_needs_the_generalist_view_and_one_action_box():

@@ -112,7 +112,8 @@ class FamilyTask:
       For slots whose flow is the wake as posed (``posed``, passed by the env), with probability
       ``posed_wake_regions_share`` instead (when set): the paper's task in the paper's flow, seen more often
       without posing it in every other flow. Of those, with probability ``posed_wake_any_start_share`` the start is
-      drawn anywhere in the domain instead of in Region 1 (the extended domain of the paper's Fig. 4).
+      drawn anywhere in ``posed_wake_any_start_box`` (default: the shrunk domain) instead of in Region 1 (the
+      extended domain of the paper's Fig. 4).
     * Otherwise: start uniform in ``domain`` shrunk by ``margin`` on every side, target at a distance uniform in
       ``distance`` in a direction uniform on the sphere, drawn again until it lies in the shrunk domain too.
     * :meth:`swim_speed`: the swimmer's speed factor (on ``env.swim_speed_scale``), 1 with probability
@@ -132,6 +133,7 @@ class FamilyTask:
         full_speed_share: float = 0.5,
         posed_wake_regions_share: float | None = None,
         posed_wake_any_start_share: float = 0.0,
+        posed_wake_any_start_box: Box | None = None,
     ):
         self.distance = tuple(float(d) for d in distance)
         self.swim_range = tuple(float(s) for s in swim_speed)
@@ -159,6 +161,7 @@ class FamilyTask:
         self.regions_share, self.full_speed_share = float(regions_share), float(full_speed_share)
         self.posed_wake_regions_share = None if posed_wake_regions_share is None else float(posed_wake_regions_share)
         self.posed_wake_any_start_share = float(posed_wake_any_start_share)
+        self.any_start_box = posed_wake_any_start_box
 
     @property
     def reads_posed(self) -> bool:
@@ -176,7 +179,8 @@ class FamilyTask:
         paper = torch.rand(n, 1, generator=generator, device=device) < share
         if posed is not None and self.posed_wake_any_start_share > 0:  # drawn only then: other streams unchanged
             anywhere = torch.rand(n, 1, generator=generator, device=device) < self.posed_wake_any_start_share
-            r_start = torch.where(posed[:, None] & anywhere, start, r_start)
+            far = start if self.any_start_box is None else self.any_start_box.sample(n, generator, device)
+            r_start = torch.where(posed[:, None] & anywhere, far, r_start)
         return torch.where(paper, r_start, start), torch.where(paper, r_target, target)
 
     def swim_speed(self, n: int, generator: torch.Generator | None = None, device="cpu") -> Tensor:

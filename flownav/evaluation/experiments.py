@@ -24,7 +24,7 @@ from flownav.errors import CheckpointError, DataError
 from flownav.evaluation.kinds import kind
 from flownav.evaluation.protocol import EVAL_SEED, EvalSpec, Evaluation, evaluate
 from flownav.evaluation.registry import Missing
-from flownav.evaluation.scripted import SCRIPTED
+from flownav.evaluation.scripted import SCRIPTED, scripted_view
 from flownav.evaluation.tables import log_line
 from flownav.paths import resolve
 from flownav.provenance import sha256
@@ -97,12 +97,13 @@ class Suite:
     def _scripted(name: str, kind: str, settings: dict | None = None):
         if kind not in SCRIPTED:
             raise ValueError(f"policies.{name}.scripted is {kind!r}; choose one of {sorted(SCRIPTED)}")
-        info = {"checkpoint": f"scripted:{kind}", "sha256": "-", "obs": "geo", "role": "reference"}
         try:
             policy = SCRIPTED[kind](**(settings or {}))
         except (TypeError, ValueError) as e:
             raise ValueError(f"policies.{name}.settings: {e}") from e
-        return policy, "geo", info | ({"settings": settings} if settings else {})
+        view = scripted_view(policy)
+        info = {"checkpoint": f"scripted:{kind}", "sha256": "-", "obs": view, "role": "reference"}
+        return policy, view, info | ({"settings": settings} if settings else {})
 
     def spec(self, name: str, flow, task_cfg, env_cfg, episodes: int, seed: int | None = None) -> EvalSpec:
         """The :class:`EvalSpec` of policy ``name`` on one setting: the suite's seed (or ``seed``), its chunk size,

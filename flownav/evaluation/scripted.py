@@ -1,6 +1,7 @@
 """A scripted geo expert ("turn towards the target, swim at full speed") and a way to turn any expert into a
 checkpointable :class:`~flownav.agents.DeterministicPolicy` by regression. Used by tests and benchmarks as a
-stand-in teacher; it is no navigator for the wake (it ignores the flow)."""
+stand-in teacher; it is no navigator for the wake (it ignores the flow).
+The flow-compensating expert reads the privileged view: the local flow and its own swim speed."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import math
 import torch
 from torch import Tensor, nn
 
+from flownav.agents.flow_compensating import FlowCompensating
 from flownav.agents.networks import DeterministicPolicy
 from flownav.agents.prior import head_to_target
 from flownav.envs.navigation import DPSI_MAX, DTHETA_MAX
@@ -42,7 +44,12 @@ class Passive(nn.Module):
 
 # Scripted reference policies the evaluation suite can name (``policies.<name>.scripted``, keyword arguments in
 # ``policies.<name>.settings``); all read the geo view. The oracle (oracle.py) plans from the env's true state.
-SCRIPTED = {"head_to_target": HeadToTarget, "passive": Passive, "oracle": Oracle}
+SCRIPTED = {"head_to_target": HeadToTarget, "passive": Passive, "oracle": Oracle, "flow_compensating": FlowCompensating}
+
+
+def scripted_view(policy) -> str:
+    """The observation view a scripted policy reads (``geo`` unless it names another)."""
+    return getattr(policy, "view", "geo")
 
 
 def random_geo_obs(n: int, generator: torch.Generator | None = None, scale: float = 12.0) -> Tensor:

@@ -1,0 +1,38 @@
+"""The flow-compensating expert: head-to-target for a swimmer that knows the local flow and its own swim speed.
+
+It reads the privileged view ``geo_priv`` (flownav/envs/observations.py) and is a scripted reference of the
+evaluation (``scripted:flow_compensating``) and, in the paper's wake, the label source of the episodes that start
+upstream of the paper's regions (flownav/agents/scene_router.py).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor, nn
+
+from flownav.agents.prior import head_to_target
+
+
+class FlowCompensating(nn.Module):
+    """Privileged view ``geo_priv`` -> the action that makes the swimmer's *total* velocity point at the target.
+
+    With the local flow u, the unit target direction r and the full swim speed U, the swim velocity
+    w = sqrt(U^2 - |u_c|^2) r - u_c cancels the flow's cross-target part u_c = u - (u.r) r and puts the rest of U
+    towards the target (in a uniform current the straight, fastest track; head-to-target instead curves
+    downstream and, against a strong current, leaves the domain). Where |u_c| >= U it swims straight against
+    u_c. The heading is then turned towards w as head-to-target turns towards the target."""
+
+    view = "geo_priv"
+
+    def __init__(self, u_max: float = 1.0, speed_fraction: float = 0.98):
+        super().__init__()
+        self.u_max, self.speed_fraction = float(u_max), float(speed_fraction)
+
+    def forward(self, obs: Tensor) -> Tensor:
+        d, flow, swim = obs[..., :3], obs[..., 9:12], obs[..., 21:22]
+        r = d / d.norm(dim=-1, keepdim=True).clamp_min(1e-6)
+        cross = flow - (flow * r).sum(-1, keepdim=True) * r
+        along = (swim.square() - cross.square().sum(-1, keepdim=True)).clamp_min(0).sqrt()
+        w = torch.where(along > 0, along * r - cross, -cross)
+        theta, psi = torch.atan2(obs[..., 7], obs[..., 6]), obs[..., 8]
+        return head_to_target(w, theta, psi, self.u_max, self.speed_fraction)
