@@ -164,6 +164,7 @@ def build_task(cfg: Mapping, flow: FlowField):
             "full_speed_share",
             "posed_wake_regions_share",
             "posed_wake_any_start_share",
+            "posed_wake_reverse_share",
         )
         kw |= {k: float(cfg[k]) for k in shares if cfg.get(k) is not None}
         if cfg.get("posed_wake_any_start_box") is not None:

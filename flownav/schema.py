@@ -259,6 +259,7 @@ TASKS = {
         "posed_wake_regions_share": Float(ge=0, le=1, null=True),
         "posed_wake_any_start_share": Float(ge=0, le=1),
         "posed_wake_any_start_box": Key(BOX, null=True),
+        "posed_wake_reverse_share": Float(ge=0, le=1),
         "start": Key(BOX, null=True),
         "target": Key(BOX, null=True),
         "swim_speed": Key(FLOATS, size=2, gt=0),
@@ -329,6 +330,7 @@ DAGGER = {
     "activation": NETWORK["activation"],
     "prior": PRIOR,
     "scene_expert": Str(null=True),
+    "scene_reverse_expert": Str(null=True),
     "final_eval_episodes": Int(ge=0),
     "results_json": Str(null=True),
 }

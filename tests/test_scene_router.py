@@ -66,14 +66,17 @@ class Constant(torch.nn.Module):
 
 
 def test_the_routed_teacher_hands_the_flagged_rows_to_the_expert():
-    teacher = SceneRoutedTeacher(Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9))
-    obs = torch.randn(7, 24)
-    obs[:, -1] = torch.tensor([1.0, 0.0, 1.0, 0.0, 0.0, 1.0, 2.0])
-    out = teacher(obs)
+    generalist, expert = Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9)
+    obs = torch.randn(8, 24)
+    obs[:, -1] = torch.tensor([1.0, 0.0, 1.0, 0.0, 0.0, 1.0, 2.0, 3.0])
+    out = SceneRoutedTeacher(generalist, expert)(obs)
     assert torch.equal(out[obs[:, -1] == 1], torch.tensor([[0.9, -0.5, 0.0]]).expand(3, 3))
-    assert torch.equal(out[obs[:, -1] == 0], torch.tensor([[0.1, 0.2, 0.3]]).expand(3, 3))
+    # code 3 (the crossing the other way) without its expert: the generalist
+    assert torch.equal(out[(obs[:, -1] == 0) | (obs[:, -1] == 3)], torch.tensor([[0.1, 0.2, 0.3]]).expand(4, 3))
     # code 2 (the paper's scene from upstream of its regions): the flow-compensating expert
-    assert torch.equal(out[-1], FlowCompensating()(obs[-1:, :-1])[0])
+    assert torch.equal(out[6], FlowCompensating()(obs[6:7, :-1])[0])
+    with_reverse = SceneRoutedTeacher(generalist, expert, reverse=Constant([0.5, 0.0, -0.1], 9))(obs)
+    assert torch.equal(with_reverse[7], torch.tensor([0.5, 0.0, -0.1])) and torch.equal(with_reverse[:7], out[:7])
 
 
 def test_an_episode_that_starts_upstream_in_the_papers_scene_is_coded_2_all_along():
@@ -98,15 +101,32 @@ def test_an_episode_that_starts_upstream_in_the_papers_scene_is_coded_2_all_alon
     assert torch.equal(td["geo_priv_scene"][running, -1], expected[running])
 
 
+def test_the_crossing_from_region_2_to_region_1_in_the_posed_wake_is_coded_3():
+    task = FamilyTask(WAKE_BOUNDS, regions_share=0.0, posed_wake_regions_share=1.0, posed_wake_reverse_share=0.5)
+    env = NavigationEnv(posed_and_turned_wakes(), task, num_envs=512, views=("geo_priv_scene",), seed=5)
+    code = env.reset()["geo_priv_scene"][:, -1]
+    in_posed, s = env.flow.params["member"] == 0, env.state
+    back = REGION_2.contains(s.pos) & REGION_1.contains(s.target)
+    assert torch.equal(back, in_posed & ~REGION_1.contains(s.pos))  # the posed wake's crossings, either way
+    assert 0.4 < back[in_posed].float().mean() < 0.6
+    full = s.swim_scale == 1
+    assert torch.equal(code == 3, back & full) and torch.equal(code == 1, in_posed & ~back & full)
+
+
 def test_scene_routing_needs_the_generalist_view_and_one_action_box():
     generalist = DeterministicPolicy(23, LOW, HIGH, hidden=[8])
     expert = DeterministicPolicy(9, LOW, HIGH, hidden=[8])
-    assert isinstance(scene_routed(generalist, "geo_priv", expert, "teacher.pt"), SceneRoutedTeacher)
+    routed = scene_routed(generalist, "geo_priv", {"scene_expert": ("teacher.pt", expert)})
+    assert isinstance(routed, SceneRoutedTeacher) and routed.reverse is None
     with pytest.raises(CheckpointError, match="reads 'geo_sincos': pass the generalist teacher"):
-        scene_routed(expert, "geo_sincos", expert, "teacher.pt")
+        scene_routed(expert, "geo_sincos", {"scene_expert": ("teacher.pt", expert)})
     other = DeterministicPolicy(9, LOW, [2.0, 0.785, 1.571], hidden=[8])
-    with pytest.raises(CheckpointError, match="another action box"):
-        scene_routed(generalist, "geo_priv", other, "other.pt")
+    with pytest.raises(CheckpointError, match="algo.scene_reverse_expert other.pt acts in another action box"):
+        scene_routed(
+            generalist,
+            "geo_priv",
+            {"scene_expert": ("teacher.pt", expert), "scene_reverse_expert": ("other.pt", other)},
+        )
 
 
 def posed_and_turned_wakes() -> MixtureFamily:

@@ -7,7 +7,9 @@ in the paper's training task as posed", flownav.envs.core.paper_scene) and lets 
 that a DAgger student over the families imitates the better teacher of each scene. Episodes of that scene which
 start upstream of the paper's regions (flag 2: the extended domain, ``task.posed_wake_any_start_share``) go to the
 flow-compensating expert (flownav/agents/flow_compensating.py), which reaches the target from there where the
-paper's teacher mostly does not.
+paper's teacher mostly does not. The crossing the other way (flag 3: Region 2 to Region 1,
+``task.posed_wake_reverse_share``) goes to an expert of that crossing when one is given (``algo.scene_reverse_expert``,
+e.g. the paper's SI-2 teacher ``checkpoints/teacher_symmetric.pt``), else to the generalist.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import torch
 from torch import nn
 
 from flownav.agents.flow_compensating import FlowCompensating
+from flownav.envs.core import SCENE_PAPER, SCENE_REVERSE, SCENE_UPSTREAM
 from flownav.envs.observations import observation_size
 from flownav.errors import CheckpointError
 
@@ -25,30 +28,41 @@ EXPERT_VIEW = "geo_sincos"
 
 
 class SceneRoutedTeacher(nn.Module):
-    """``expert`` where the view's last entry (the paper-scene code) is 1, the flow-compensating expert where it is
-    2, ``generalist`` elsewhere. The expert reads the first 9 numbers of the view (``geo_priv`` begins with
-    ``geo_sincos``), the other two all but the code."""
+    """The expert of each row's paper-scene code (the view's last entry, flownav.envs.core.paper_scene):
+    ``expert`` for SCENE_PAPER, the flow-compensating expert for SCENE_UPSTREAM, ``reverse`` (if given) for
+    SCENE_REVERSE, ``generalist`` elsewhere. ``expert`` and ``reverse`` read the first 9 numbers of the view
+    (``geo_priv`` begins with ``geo_sincos``), the other two all but the code."""
 
-    def __init__(self, generalist: nn.Module, expert: nn.Module, u_max: float = 1.0):
+    def __init__(self, generalist: nn.Module, expert: nn.Module, u_max: float = 1.0, reverse: nn.Module | None = None):
         super().__init__()
-        self.generalist, self.expert = generalist, expert
+        self.generalist, self.expert, self.reverse = generalist, expert, reverse
         self.upstream = FlowCompensating(u_max)
         self.expert_size = observation_size(EXPERT_VIEW)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        code, view = obs[:, -1:], obs[:, :-1]
-        elsewhere = torch.where(code > 1.5, self.upstream(view), self.generalist(view))
-        return torch.where((code > 0.5) & (code < 1.5), self.expert(obs[:, : self.expert_size]), elsewhere)
+        code, view, geo = obs[:, -1:].round(), obs[:, :-1], obs[:, : self.expert_size]
+        out = torch.where(code == SCENE_UPSTREAM, self.upstream(view), self.generalist(view))
+        if self.reverse is not None:
+            out = torch.where(code == SCENE_REVERSE, self.reverse(geo), out)
+        return torch.where(code == SCENE_PAPER, self.expert(geo), out)
 
 
-def scene_routed(generalist: nn.Module, generalist_view: str, expert: nn.Module, expert_name) -> SceneRoutedTeacher:
-    """The routed teacher of a ``geo_priv`` generalist and a ``geo_sincos`` expert (loaded from ``expert_name``)."""
+def scene_routed(generalist: nn.Module, generalist_view: str, experts: dict) -> SceneRoutedTeacher:
+    """The routed teacher of a ``geo_priv`` generalist and ``geo_sincos`` experts: ``experts`` maps the config key
+    (``algo.scene_expert``, optionally ``algo.scene_reverse_expert``) to (checkpoint name, loaded policy)."""
     if generalist_view != GENERALIST_VIEW:
         raise CheckpointError(
             f"algo.scene_expert routes between a {GENERALIST_VIEW!r} teacher and the paper's; the teacher checkpoint "
             f"reads {generalist_view!r}: pass the generalist teacher (python train.py +experiment=generalist_teacher)"
         )
     box = lambda p: [round(v, 6) for v in p.config["action_low"] + p.config["action_high"]]  # noqa: E731
-    if box(expert) != box(generalist):
-        raise CheckpointError(f"algo.scene_expert {expert_name} acts in another action box than the teacher")
-    return SceneRoutedTeacher(generalist, expert, u_max=float(generalist.config["action_high"][0]))
+    for key, (name, policy) in experts.items():
+        if box(policy) != box(generalist):
+            raise CheckpointError(f"algo.{key} {name} acts in another action box than the teacher")
+    reverse = experts.get("scene_reverse_expert")
+    return SceneRoutedTeacher(
+        generalist,
+        experts["scene_expert"][1],
+        u_max=float(generalist.config["action_high"][0]),
+        reverse=reverse[1] if reverse else None,
+    )

@@ -152,13 +152,18 @@ def train(cfg, run_dir) -> dict:
         "teacher_sha256": sha256(resolve(str(cfg.teacher_checkpoint))),
     }
     if a.get("scene_expert"):  # the paper's teacher acts in the paper's scene (flownav/agents/scene_router.py)
-        expert, _ = load_policy(resolve(str(a.scene_expert)), expect_obs=EXPERT_VIEW, device=device)
-        teacher = scene_routed(teacher, teacher_view, expert, a.scene_expert)
-        teacher_view = ROUTED_VIEW
-        teacher_meta |= {
-            "scene_expert": str(a.scene_expert),
-            "scene_expert_sha256": sha256(resolve(str(a.scene_expert))),
+        keys = [k for k in ("scene_expert", "scene_reverse_expert") if a.get(k)]
+        experts = {
+            k: (str(a[k]), load_policy(resolve(str(a[k])), expect_obs=EXPERT_VIEW, device=device)[0]) for k in keys
         }
+        teacher = scene_routed(teacher, teacher_view, experts)
+        teacher_view = ROUTED_VIEW
+        for k in keys:
+            teacher_meta |= {k: str(a[k]), f"{k}_sha256": sha256(resolve(str(a[k])))}
+    elif a.get("scene_reverse_expert"):
+        raise ConfigError(
+            "algo.scene_reverse_expert needs algo.scene_expert: it is one expert of the scene-routed teacher"
+        )
     flow = build_flow(cfg.flow, device=device)
     task = build_task(cfg.task, flow)
     env = build_env(

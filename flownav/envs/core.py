@@ -40,7 +40,7 @@ from flownav.envs.observations import (
     needs_target_flow,
 )
 from flownav.envs.reward import RewardConfig, step_reward
-from flownav.envs.tasks import REGION_2
+from flownav.envs.tasks import REGION_1, REGION_2
 from flownav.errors import ConfigError, require_finite
 from flownav.flows.base import FlowField
 from flownav.flows.families import FlowFamily
@@ -389,13 +389,16 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
 # From starts upstream of this x (the cylinder's side of the paper's regions) the paper's teacher reaches the
 # extended domain's target from 61% of 4,000 starts, the flow-compensating expert from 96% (docs/generalist.md).
 UPSTREAM_X = 4.0
+# The codes of paper_scene: which expert of a scene-routed teacher labels a swimmer (flownav/agents/scene_router.py).
+SCENE_NONE, SCENE_PAPER, SCENE_UPSTREAM, SCENE_REVERSE = 0, 1, 2, 3
 
 
 def paper_scene(state: Swimmers, flow: FlowField, settings: Settings) -> Tensor:
-    """``[B]`` code of the paper's scene: 0 outside it; 1 in the paper's training task as posed (the CFD wake
-    unturned: no misalignment, a family slot drawn without rotation, scaling or background; at strength 1; the
-    swimmer at its full speed; the target in Region 2); 2 there for an episode that started upstream of
-    ``UPSTREAM_X``. What the simulator knows and a scene-routed teacher reads."""
+    """``[B]`` code of the paper's scene: the CFD wake as posed (unturned: no misalignment, a family slot drawn
+    without rotation, scaling or background; at strength 1) with the swimmer at its full speed, and
+    SCENE_PAPER: the target in Region 2 (the paper's training task); SCENE_UPSTREAM: the same for an episode that
+    started upstream of ``UPSTREAM_X``; SCENE_REVERSE: from Region 2 to a target in Region 1 (the crossing the other
+    way, paper SI 2); else SCENE_NONE. What the simulator knows and a scene-routed teacher reads."""
     slots = torch.arange(state.pos.shape[0], device=state.pos.device)
     if isinstance(flow, FlowFamily):
         posed = flow.wake_as_posed(slots)
@@ -403,8 +406,12 @@ def paper_scene(state: Swimmers, flow: FlowField, settings: Settings) -> Tensor:
         posed = torch.full_like(slots, isinstance(flow, GridFlow) and bool(flow.obstacles), dtype=torch.bool)
     if settings.flow_strength is not None:
         posed = posed & (state.strength == 1)
-    scene = (posed & (state.swim_scale == 1) & REGION_2.contains(state.target)).long()
-    return scene * torch.where(state.start[:, 0] < UPSTREAM_X, 2, 1)
+    posed = posed & (state.swim_scale == 1)
+    forward = posed & REGION_2.contains(state.target)
+    reverse = posed & REGION_1.contains(state.target) & REGION_2.contains(state.start)
+    code = torch.where(state.start[:, 0] < UPSTREAM_X, SCENE_UPSTREAM, SCENE_PAPER)
+    code = torch.where(forward, code, SCENE_NONE)
+    return torch.where(reverse, SCENE_REVERSE, code)
 
 
 def flow_history(state: Swimmers) -> Tensor:

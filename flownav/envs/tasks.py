@@ -113,7 +113,8 @@ class FamilyTask:
       ``posed_wake_regions_share`` instead (when set): the paper's task in the paper's flow, seen more often
       without posing it in every other flow. Of those, with probability ``posed_wake_any_start_share`` the start is
       drawn anywhere in ``posed_wake_any_start_box`` (default: the shrunk domain) instead of in Region 1 (the
-      extended domain of the paper's Fig. 4).
+      extended domain of the paper's Fig. 4); with probability ``posed_wake_reverse_share`` the crossing goes the other
+      way, from Region 2 to Region 1 (the paper's SI 2).
     * Otherwise: start uniform in ``domain`` shrunk by ``margin`` on every side, target at a distance uniform in
       ``distance`` in a direction uniform on the sphere, drawn again until it lies in the shrunk domain too.
     * :meth:`swim_speed`: the swimmer's speed factor (on ``env.swim_speed_scale``), 1 with probability
@@ -134,6 +135,7 @@ class FamilyTask:
         posed_wake_regions_share: float | None = None,
         posed_wake_any_start_share: float = 0.0,
         posed_wake_any_start_box: Box | None = None,
+        posed_wake_reverse_share: float = 0.0,
     ):
         self.distance = tuple(float(d) for d in distance)
         self.swim_range = tuple(float(s) for s in swim_speed)
@@ -145,6 +147,7 @@ class FamilyTask:
             "regions_share": regions_share,
             "full_speed_share": full_speed_share,
             "posed_wake_any_start_share": posed_wake_any_start_share,
+            "posed_wake_reverse_share": posed_wake_reverse_share,
         }
         if posed_wake_regions_share is not None:
             shares["posed_wake_regions_share"] = posed_wake_regions_share
@@ -162,17 +165,20 @@ class FamilyTask:
         self.posed_wake_regions_share = None if posed_wake_regions_share is None else float(posed_wake_regions_share)
         self.posed_wake_any_start_share = float(posed_wake_any_start_share)
         self.any_start_box = posed_wake_any_start_box
+        self.posed_wake_reverse_share = float(posed_wake_reverse_share)
 
     @property
     def reads_posed(self) -> bool:
         """Whether :meth:`sample` treats the wake as posed apart: the env then passes ``posed``."""
-        return self.posed_wake_regions_share is not None or self.posed_wake_any_start_share > 0
+        shares = (self.posed_wake_any_start_share, self.posed_wake_reverse_share)
+        return self.posed_wake_regions_share is not None or max(shares) > 0
 
     def sample(
         self, n: int, generator: torch.Generator | None = None, device="cpu", posed: Tensor | None = None
     ) -> tuple[Tensor, Tensor]:
         start, target = self.anywhere.sample(n, generator, device)
         r_start, r_target = self.regions.sample(n, generator, device)
+        region_start = r_start
         share = torch.full((n, 1), self.regions_share, device=device)
         if posed is not None and self.posed_wake_regions_share is not None:
             share = torch.where(posed[:, None], self.posed_wake_regions_share, share)
@@ -181,6 +187,11 @@ class FamilyTask:
             anywhere = torch.rand(n, 1, generator=generator, device=device) < self.posed_wake_any_start_share
             far = start if self.any_start_box is None else self.any_start_box.sample(n, generator, device)
             r_start = torch.where(posed[:, None] & anywhere, far, r_start)
+        if posed is not None and self.posed_wake_reverse_share > 0:  # drawn only then: other streams unchanged
+            back = posed[:, None] & (
+                torch.rand(n, 1, generator=generator, device=device) < self.posed_wake_reverse_share
+            )
+            r_start, r_target = torch.where(back, r_target, r_start), torch.where(back, region_start, r_target)
         return torch.where(paper, r_start, start), torch.where(paper, r_target, target)
 
     def swim_speed(self, n: int, generator: torch.Generator | None = None, device="cpu") -> Tensor:
