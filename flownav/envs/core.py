@@ -387,7 +387,7 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
 
 
 # From starts upstream of this x (the cylinder's side of the paper's regions) the paper's teacher reaches the
-# extended domain's target from 61% of 4,000 starts, the flow-compensating expert from 96% (docs/generalist.md).
+# extended domain's target in 59% of 4,000 episodes, the flow-compensating expert in 96% (docs/generalist.md).
 UPSTREAM_X = 4.0
 # The codes of paper_scene: which expert of a scene-routed teacher labels a swimmer (flownav/agents/scene_router.py).
 SCENE_NONE, SCENE_PAPER, SCENE_UPSTREAM, SCENE_REVERSE = 0, 1, 2, 3
