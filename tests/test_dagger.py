@@ -15,6 +15,7 @@ from tiny import DRIFT_TASK
 
 from flownav.algorithms.dagger import beta_at, imitation_loss
 from flownav.checkpoint import CheckpointError, load_checkpoint, load_policy, save_policy_checkpoint
+from flownav.errors import ConfigError
 from flownav.evaluation.scripted import HeadToTarget, fit_expert
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -154,6 +155,14 @@ def test_teacher_of_the_wrong_view_is_refused(tmp_path):
         train.run(make_cfg(ego, "algo.iterations=1", "algo.teacher_view=geo"), tmp_path / "run")
     with pytest.raises(CheckpointError, match="no checkpoint"):
         train.run(make_cfg(tmp_path / "nothing.pt", "algo.iterations=1"), tmp_path / "run2")
+
+
+def test_a_reverse_expert_without_the_scene_expert_is_refused(teacher_ckpt, tmp_path):
+    import train
+
+    cfg = make_cfg(teacher_ckpt, "algo.iterations=1", f"algo.scene_reverse_expert={teacher_ckpt}")
+    with pytest.raises(ConfigError, match=r"^algo.scene_reverse_expert needs algo.scene_expert"):
+        train.run(cfg, tmp_path / "run")
 
 
 def test_beta_one_executes_the_teacher(teacher_ckpt):
