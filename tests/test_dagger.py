@@ -17,6 +17,7 @@ from flownav.algorithms.dagger import beta_at, imitation_loss
 from flownav.checkpoint import CheckpointError, load_checkpoint, load_policy, save_policy_checkpoint
 from flownav.errors import ConfigError
 from flownav.evaluation.scripted import HeadToTarget, fit_expert
+from flownav.flows.base import WAKE_BOUNDS
 
 ROOT = Path(__file__).resolve().parents[1]
 CONF = str(ROOT / "conf")
@@ -74,6 +75,10 @@ def test_every_student_imitates_a_teacher_trained_on_its_flow_and_task():
         if cfg.algo.get("scene_expert"):  # a routed teacher: the same families, weighted towards the paper's task
             assert unweighted(cfgs[teacher].flow) == unweighted(cfg.flow), f"{name} vs {teacher}"
             assert unweighted(cfgs[teacher].task) == unweighted(cfg.task), f"{name} vs {teacher}"
+            if cfg.task.get("posed_wake_any_start_box"):  # a part of the teacher's starts, weighted up
+                lo, hi = cfg.task.posed_wake_any_start_box
+                m = cfg.task.margin
+                assert all(WAKE_BOUNDS.lo[i] + m <= lo[i] < hi[i] <= WAKE_BOUNDS.hi[i] - m for i in range(3)), name
             maker = makers.get(cfg.algo.scene_expert, Path(cfg.algo.scene_expert).stem)
             expert = cfgs[maker]  # the paper's teacher, made in the paper's scene
             assert (expert.flow.type, expert.task.type, expert.obs.view) == ("grid", "regions", "geo_sincos"), name
@@ -84,7 +89,15 @@ def test_every_student_imitates_a_teacher_trained_on_its_flow_and_task():
 
 def unweighted(cfg) -> dict:
     """A flow or task config without what only weights its draws (member weights, shares)."""
-    drop = ("weight", "regions_share", "posed_wake_regions_share", "posed_wake_any_start_share", "full_speed_share")
+    drop = (
+        "weight",
+        "regions_share",
+        "posed_wake_regions_share",
+        "posed_wake_any_start_share",
+        "posed_wake_any_start_box",  # a box inside the family's domain: it weights where those starts lie
+        "posed_wake_reverse_share",
+        "full_speed_share",
+    )
     if not isinstance(cfg, Mapping):
         return cfg
     return {k: unweighted(v) for k, v in cfg.items() if k not in drop}
