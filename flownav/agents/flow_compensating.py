@@ -10,7 +10,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from flownav.agents.prior import head_to_target
+from flownav.agents.prior import head_to_target, target_and_heading
 
 
 class FlowCompensating(nn.Module):
@@ -29,10 +29,10 @@ class FlowCompensating(nn.Module):
         self.u_max, self.speed_fraction = float(u_max), float(speed_fraction)
 
     def forward(self, obs: Tensor) -> Tensor:
-        d, flow, swim = obs[..., :3], obs[..., 9:12], obs[..., 21:22]
+        d, theta, psi = target_and_heading(obs, self.view)
+        flow, swim = obs[..., 9:12], obs[..., 21:22]  # geo_priv: geo_sincos (9), the local flow, ..., swim speed
         r = d / d.norm(dim=-1, keepdim=True).clamp_min(1e-6)
         cross = flow - (flow * r).sum(-1, keepdim=True) * r
         along = (swim.square() - cross.square().sum(-1, keepdim=True)).clamp_min(0).sqrt()
         w = torch.where(along > 0, along * r - cross, -cross)
-        theta, psi = torch.atan2(obs[..., 7], obs[..., 6]), obs[..., 8]
         return head_to_target(w, theta, psi, self.u_max, self.speed_fraction)

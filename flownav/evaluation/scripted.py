@@ -43,7 +43,8 @@ class Passive(nn.Module):
 
 
 # Scripted reference policies the evaluation suite can name (``policies.<name>.scripted``, keyword arguments in
-# ``policies.<name>.settings``); all read the geo view. The oracle (oracle.py) plans from the env's true state.
+# ``policies.<name>.settings``); each reads the geo view unless it names another (``view``, see scripted_view).
+# The oracle (oracle.py) plans from the env's true state.
 SCRIPTED = {"head_to_target": HeadToTarget, "passive": Passive, "oracle": Oracle, "flow_compensating": FlowCompensating}
 
 
