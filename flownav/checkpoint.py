@@ -273,18 +273,20 @@ def _flat(tree, prefix=""):
 
 def check_resume_settings(resume, payload: dict, config: dict) -> None:
     """Refuse (a config error) a resume whose config differs from the run's own (``payload['meta']['config']``)
-    in a key outside :data:`RESUME_MAY_CHANGE`, naming the keys with both values."""
+    in a key outside :data:`RESUME_MAY_CHANGE`, naming the keys with both values. A key the run's config does
+    not have counts as the same when it is null here (a setting added since, left at its default)."""
     saved = (payload.get("meta") or {}).get("config")
     if not isinstance(saved, dict):
         raise ConfigError(f"resume={resume}: its checkpoint records no config; resume a run of this version")
     there, here = _flat(saved), _flat(config)
     allowed = lambda key: any(key == k or key.startswith(k + ".") for k in RESUME_MAY_CHANGE)  # noqa: E731
-    missing = object()
-    differ = [
-        k
-        for k in sorted(there.keys() | here.keys())
-        if not allowed(k) and there.get(k, missing) != here.get(k, missing)
-    ]
+
+    def same(key) -> bool:
+        if key in there and key in here:
+            return there[key] == here[key]
+        return key not in there and here[key] is None  # a setting added since, left at its default (off)
+
+    differ = [k for k in sorted(there.keys() | here.keys()) if not allowed(k) and not same(k)]
     if differ:
         shown = "; ".join(
             f"{k}={there[k] if k in there else '(unset)'} there, {here[k] if k in here else '(unset)'} here"

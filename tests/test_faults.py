@@ -428,6 +428,19 @@ def test_a_resume_with_other_settings_is_refused_before_anything_is_written(tmp_
     assert not (tmp_path / "unused").exists()
 
 
+def test_a_resume_accepts_a_setting_added_since_at_its_null_default_only():
+    """A run saved before a key existed resumes when that key is null (off) here, and is refused when it is set."""
+    from flownav.checkpoint import check_resume_settings
+
+    payload = {"meta": {"config": {"algo": {"lr": 0.001}}}}
+    check_resume_settings("run", payload, {"algo": {"lr": 0.001, "scene_reverse_expert": None}})
+    message = "algo.scene_reverse_expert=(unset) there, x.pt here"
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        check_resume_settings("run", payload, {"algo": {"lr": 0.001, "scene_reverse_expert": "x.pt"}})
+    with pytest.raises(ConfigError, match=re.escape("algo.gone=None there, (unset) here")):
+        check_resume_settings("run", {"meta": {"config": {"algo": {"gone": None}}}}, {"algo": {}})
+
+
 class _Parsed(Exception):
     """Raised instead of parsing: carries the command line's parser."""
 
