@@ -324,6 +324,7 @@ DAGGER = {
     "batch_size": Int(ge=1),
     "updates_per_iteration": Int(ge=1),
     "lr": Float(gt=0),
+    "lr_final": Float(gt=0, null=True),
     "weight_decay": Float(ge=0),
     "grad_clip": Float(ge=0),
     "hidden": Key(INTS, ge=1),

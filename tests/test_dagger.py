@@ -13,7 +13,7 @@ import torch
 from hydra import compose, initialize_config_dir
 from tiny import DRIFT_TASK
 
-from flownav.algorithms.dagger import beta_at, imitation_loss
+from flownav.algorithms.dagger import beta_at, imitation_loss, lr_at
 from flownav.checkpoint import CheckpointError, load_checkpoint, load_policy, save_policy_checkpoint
 from flownav.errors import ConfigError
 from flownav.evaluation.scripted import HeadToTarget, fit_expert
@@ -109,6 +109,10 @@ def test_beta_schedule_and_loss():
             initial, decay = 1.0, 0.5
 
     assert [beta_at(A, i) for i in range(3)] == [1.0, 0.5, 0.25]
+    constant = {"lr": 1e-3, "lr_final": None, "iterations": 5}
+    assert [lr_at(constant, i) for i in range(5)] == [1e-3] * 5
+    falling = constant | {"lr_final": 2e-4}
+    assert [lr_at(falling, i) for i in range(5)] == pytest.approx([1e-3, 8e-4, 6e-4, 4e-4, 2e-4])
     pred, target = torch.zeros(4, 3), torch.ones(4, 3)
     assert float(imitation_loss(pred, target)) == pytest.approx(3.0)  # eq. 9 sums over the 3 action components
 

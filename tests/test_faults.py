@@ -255,14 +255,18 @@ def test_dagger_resumes_bit_for_bit_after_a_failure(teacher_ckpt, tmp_path, monk
     import train
     from flownav.algorithms import dagger
 
-    train.run(dagger_cfg(teacher_ckpt, "algo.iterations=5"), tmp_path / "straight")
+    budget = ("algo.iterations=5", "algo.lr_final=2e-4")  # the learning rate falls: the resume must continue it
+    train.run(dagger_cfg(teacher_ckpt, *budget), tmp_path / "straight")
     with monkeypatch.context() as m:
         interrupt_at(m, dagger, 4)
         with pytest.raises(Interrupt):
-            train.run(dagger_cfg(teacher_ckpt, "algo.iterations=5"), tmp_path / "part")
+            train.run(dagger_cfg(teacher_ckpt, *budget), tmp_path / "part")
     part = load_checkpoint(tmp_path / "part" / "checkpoints" / "last.pt")["train_state"]
     assert part["iteration"] == 3 and len(part["buffer"]["obs"]) == 1500  # one file, the filled part
-    train.run(dagger_cfg(teacher_ckpt, "algo.iterations=5", f"resume={tmp_path / 'part'}"), tmp_path / "unused")
+    train.run(dagger_cfg(teacher_ckpt, *budget, f"resume={tmp_path / 'part'}"), tmp_path / "unused")
+    with open(tmp_path / "part" / "metrics.csv") as f:
+        lrs = [float(row["lr"]) for row in csv.DictReader(f)]
+    assert lrs == pytest.approx([1e-3, 8e-4, 6e-4, 4e-4, 2e-4])
     a, b = tmp_path / "straight" / "checkpoints" / "last.pt", tmp_path / "part" / "checkpoints" / "last.pt"
     print(f"\nDAgger resume: max |difference| of the final weights = {max_weight_difference(a, b)}")  # pytest -s
     assert max_weight_difference(a, b) == 0.0

@@ -14,7 +14,8 @@ One iteration, read top to bottom in :func:`train`:
 3. **Normalise.** The student's observation normaliser is set to the mean and variance of the
    aggregated observations.
 4. **Fit.** ``updates_per_iteration`` Adam steps on minibatches sampled uniformly from the buffer,
-   minimising eq. 9: ``L = 1/N sum_i sum_j (a_hat_ij - a*_ij)^2`` (actions in their physical units).
+   minimising eq. 9: ``L = 1/N sum_i sum_j (a_hat_ij - a*_ij)^2`` (actions in their physical units), at
+   the rate ``lr`` (or, with ``lr_final``, one falling linearly to it over the iterations).
 
 Logged per iteration (``metrics.csv``, wandb): ``train/loss`` (eq. 9, mean over the iteration's
 updates), ``train/loss_onpolicy`` (eq. 9 of the student on the states it just visited, before fitting:
@@ -90,6 +91,15 @@ def check_config(cfg) -> None:
 
 def beta_at(a, iteration: int) -> float:
     return float(a.beta.initial) * float(a.beta.decay) ** iteration
+
+
+def lr_at(a, iteration: int) -> float:
+    """The fit's learning rate at ``iteration`` (0-based): ``lr``, or linear from ``lr`` to ``lr_final`` at the
+    last one (the final student is then the fit of a small step, not one noisy large step from it)."""
+    lr, final = float(a["lr"]), a.get("lr_final")
+    if final is None:
+        return lr
+    return lr + (float(final) - lr) * min(iteration / max(int(a["iterations"]) - 1, 1), 1.0)
 
 
 def set_normalizer_from(policy: DeterministicPolicy, obs: torch.Tensor) -> None:
@@ -233,6 +243,9 @@ def train(cfg, run_dir) -> dict:
         set_normalizer_from(student, buffer[:]["obs"])
         # 4. fit eq. 9
         student.train()
+        lr = lr_at(a, iteration)
+        for group in optim.param_groups:
+            group["lr"] = lr
         total = 0.0
         for _ in range(updates):
             sample = buffer.sample()
@@ -249,7 +262,7 @@ def train(cfg, run_dir) -> dict:
         # the episodes that ended during collection: train/episodes, train/success_rate, train/mean_success_time, ...
         episodes = {k.replace("success_time", "mean_success_time"): v for k, v in window.pop().items()}
         metrics = {"iteration": iteration, "train/loss": total / updates, "train/loss_onpolicy": loss_onpolicy}
-        metrics |= episodes | {"train/beta": beta, "buffer/size": len(buffer)}
+        metrics |= episodes | {"train/beta": beta, "lr": lr, "buffer/size": len(buffer)}
         metrics |= {"perf/collect_s": t_collect, "perf/iteration_s": time.time() - t0}
         history.append(dict(metrics))
         logger.log(iteration, metrics)
