@@ -11,6 +11,7 @@ import torch
 from torch import Tensor, nn
 
 from flownav.agents.prior import head_to_target, target_and_heading
+from flownav.envs.observations import GEO_PRIV_FLOW, GEO_PRIV_SWIM_SPEED
 
 
 class FlowCompensating(nn.Module):
@@ -30,7 +31,7 @@ class FlowCompensating(nn.Module):
 
     def forward(self, obs: Tensor) -> Tensor:
         d, theta, psi = target_and_heading(obs, self.view)
-        flow, swim = obs[..., 9:12], obs[..., 21:22]  # geo_priv: geo_sincos (9), the local flow, ..., swim speed
+        flow, swim = obs[..., GEO_PRIV_FLOW], obs[..., GEO_PRIV_SWIM_SPEED]
         r = d / d.norm(dim=-1, keepdim=True).clamp_min(1e-6)
         cross = flow - (flow * r).sum(-1, keepdim=True) * r
         along = (swim.square() - cross.square().sum(-1, keepdim=True)).clamp_min(0).sqrt()

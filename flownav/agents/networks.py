@@ -14,7 +14,7 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor, nn
 
-from flownav.agents.prior import HeadToTargetPrior
+from flownav.agents.prior import TURN_LEFT_BIASED, HeadToTargetPrior
 
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU, "silu": nn.SiLU}
 
@@ -77,7 +77,9 @@ class DeterministicPolicy(nn.Module):
     """observation -> normalise -> MLP -> first ``action_dim`` outputs -> tanh into the action box.
 
     With ``prior`` (a view name, for :class:`~flownav.agents.prior.HeadToTargetPrior`) the MLP's first
-    ``action_dim`` outputs are a correction added to head-to-target's action before the squash."""
+    ``action_dim`` outputs are a correction added to head-to-target's action before the squash; ``prior_turn``
+    is how that head-to-target yaws (recorded in the config; a config with a prior and without it is a policy
+    trained on the left-biased rule, ``TURN_LEFT_BIASED``)."""
 
     def __init__(
         self,
@@ -88,6 +90,7 @@ class DeterministicPolicy(nn.Module):
         activation: str = "tanh",
         n_outputs: int | None = None,
         prior: str | None = None,
+        prior_turn: str | None = None,
     ):
         super().__init__()
         self.action_dim = len(action_low)
@@ -101,10 +104,13 @@ class DeterministicPolicy(nn.Module):
         }
         if prior is not None:
             self.config["prior"] = prior
+            if prior_turn is not None:
+                self.config["prior_turn"] = prior_turn
         self.normalizer = ObsNormalizer(obs_dim)
         self.net = mlp(obs_dim, self.config["n_outputs"], hidden, activation)
         self.squash = SquashedAction(action_low, action_high)
-        self.prior = None if prior is None else HeadToTargetPrior(prior, action_low, action_high)
+        turn = prior_turn or TURN_LEFT_BIASED
+        self.prior = None if prior is None else HeadToTargetPrior(prior, action_low, action_high, turn)
 
     def outputs(self, obs: Tensor) -> Tensor:
         """The MLP's outputs, the prior's action added to the first ``action_dim`` (pre-tanh)."""

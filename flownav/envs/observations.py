@@ -101,6 +101,10 @@ def _privileged(s: State) -> Tensor:
     return torch.cat((_geo_sincos(s, s.velocity), s.flow, phase), -1)
 
 
+# Where geo_priv keeps what it adds to geo_sincos (its first 9 entries).
+GEO_PRIV_FLOW, GEO_PRIV_GRADIENT, GEO_PRIV_SWIM_SPEED = slice(9, 12), slice(12, 21), slice(21, 22)
+
+
 def _geo_priv(s: State) -> Tensor:
     ratio = torch.log(s.swim_speed / (s.flow.norm(dim=-1) + 0.05))
     extra = (s.flow, s.flow_gradient.flatten(1), s.swim_speed[:, None], ratio[:, None])
