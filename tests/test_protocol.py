@@ -18,7 +18,7 @@ from flownav.paths import DEFAULT_FLOW_DATASET, REPO_ROOT
 
 pytestmark = pytest.mark.skipif(not DEFAULT_FLOW_DATASET.is_dir(), reason="needs the shipped wake dataset")
 
-EPISODES, LIMIT = 40, 20.0  # a short time limit keeps it fast; the episodes still end in different ways
+EPISODES, LIMIT = 40, 30.0  # a short time limit keeps it fast; the episodes still end in different ways
 
 
 def core(summary: dict) -> dict:
