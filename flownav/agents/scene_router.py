@@ -32,8 +32,8 @@ EXPERT_VIEW = "geo_sincos"
 
 class SceneRoutedTeacher(nn.Module):
     """The expert of each row's paper-scene code (the view's last entry, flownav.envs.core.paper_scene):
-    ``expert`` for SCENE_PAPER, the flow-compensating expert for SCENE_UPSTREAM and, outside the paper's scene,
-    where the flow's gradient is zero, ``reverse`` (if given) for SCENE_REVERSE, ``generalist`` elsewhere.
+    ``expert`` for SCENE_PAPER; the flow-compensating expert for SCENE_UPSTREAM and for SCENE_NONE rows whose flow
+    gradient is zero (a uniform flow); ``reverse`` (if given) for SCENE_REVERSE; ``generalist`` elsewhere.
     ``expert`` and ``reverse`` read the first 9 numbers of the view (``geo_priv`` begins with ``geo_sincos``), the
     other two all but the code."""
 
