@@ -26,7 +26,6 @@ from pathlib import Path
 import torch
 
 from flownav.agents.networks import DeterministicPolicy
-from flownav.agents.prior import TURN_LEFT_BIASED
 from flownav.atomic import atomic_write
 from flownav.envs.observations import observation_size
 from flownav.errors import CheckpointError, ConfigError, NonFiniteError
@@ -112,9 +111,6 @@ def restore_training_state(payload: dict, policy, optimizer, env, generators: di
     """Put the policy, optimiser, env state and RNGs of a ``last.pt`` back; return its train_state."""
     st = payload["train_state"]  # checked by load_resume_checkpoint
     policy.load_state_dict(payload["policy"]["state_dict"])
-    if policy.prior is not None:  # the run goes on with the yaw rule it was trained on
-        policy.prior.turn = payload["policy"]["config"].get("prior_turn", TURN_LEFT_BIASED)
-        policy.config["prior_turn"] = policy.prior.turn
     optimizer.load_state_dict(st["optimizer"])
     env.load_state_dict(st["env"])
     torch.set_rng_state(st["rng"]["torch"])

@@ -286,6 +286,7 @@ LOGGER = {
 }
 
 PRIOR = Str(choices=("head_to_target",), null=True)  # the policy's output corrects head-to-target's action
+PRIOR_TURN = Str(choices=("short", "left_biased"), null=True)  # how it yaws (prior.TURNS); null: left_biased
 NETWORK = {"hidden": Key(INTS, ge=1), "activation": Str(choices=("tanh", "relu", "elu", "silu"))}
 
 PPO = {
@@ -305,7 +306,14 @@ PPO = {
     "update_normalizer": Bool(),
     "normalize_advantage": Bool(),
     "max_grad_norm": Float(gt=0),
-    "actor": NETWORK | {"init_scale": Float(gt=0), "scale_lb": Float(gt=0), "output_gain": Float(gt=0), "prior": PRIOR},
+    "actor": NETWORK
+    | {
+        "init_scale": Float(gt=0),
+        "scale_lb": Float(gt=0),
+        "output_gain": Float(gt=0),
+        "prior": PRIOR,
+        "prior_turn": PRIOR_TURN,
+    },
     "critic": NETWORK,
     "init_from": Str(null=True),
     "log_every": Int(ge=1),
@@ -330,6 +338,7 @@ DAGGER = {
     "hidden": Key(INTS, ge=1),
     "activation": NETWORK["activation"],
     "prior": PRIOR,
+    "prior_turn": PRIOR_TURN,
     "scene_expert": Str(null=True),
     "scene_reverse_expert": Str(null=True),
     "final_eval_episodes": Int(ge=0),

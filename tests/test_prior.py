@@ -112,3 +112,18 @@ def test_head_to_target_holds_the_headwind_it_used_to_drift_out_of():
     spec = EvalSpec(UniformFlow((0.0, 0.8, 0.0)), RegionTask(), compose_config().env, 2000)
     left = {turn: int((evaluate(Yaw(turn), "geo", spec).episodes.status == Status.LEFT_DOMAIN).sum()) for turn in TURNS}
     assert left[TURN_SHORT] == 0 and left[TURN_LEFT_BIASED] > 30, left
+
+
+def test_the_training_config_key_builds_the_prior_it_names():
+    """``algo.prior_turn`` (DAgger) and ``algo.actor.prior_turn`` (PPO) accept the rules prior.py has; null is the
+    left-biased rule, recorded as absent, as in the shipped generalist policies."""
+    from flownav.agents.actor_critic import make_actor_critic
+    from flownav.schema import PRIOR_TURN
+
+    assert set(PRIOR_TURN.choices) == set(TURNS)
+    low, high = torch.tensor(ACTION_LOW), torch.tensor(action_high())
+    critic = {"hidden": [8], "activation": "tanh"}
+    for turn in (None, TURN_SHORT):
+        actor = {"hidden": [8], "activation": "tanh", "init_scale": 0.5, "scale_lb": 1e-3, "prior": "head_to_target"}
+        policy = make_actor_critic("geo_sincos", "geo_sincos", low, high, actor | {"prior_turn": turn}, critic)[0]
+        assert policy.prior.turn == (turn or TURN_LEFT_BIASED) and policy.config.get("prior_turn") == turn

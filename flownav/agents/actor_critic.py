@@ -14,7 +14,6 @@ from torch import nn
 from torchrl.modules import ProbabilisticActor, TanhNormal, ValueOperator
 
 from flownav.agents.networks import DeterministicPolicy, ObsNormalizer, check_mlp_size, mlp
-from flownav.agents.prior import TURN_SHORT
 from flownav.envs.observations import observation_size
 
 
@@ -64,7 +63,7 @@ def make_actor_critic(obs_key: str, critic_key: str, low, high, actor_cfg, criti
         activation=str(actor_cfg["activation"]),
         n_outputs=2 * len(low),
         prior=obs_key if actor_cfg.get("prior") else None,
-        prior_turn=TURN_SHORT,
+        prior_turn=actor_cfg.get("prior_turn"),
     )
     init_output_layer(policy.net, float(actor_cfg.get("output_gain", 0.01)))
     net = ActorNet(policy, float(actor_cfg["init_scale"]), float(actor_cfg["scale_lb"]))

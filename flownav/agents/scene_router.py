@@ -9,10 +9,7 @@ start upstream of the paper's regions (flag 2: the extended domain, ``task.posed
 flow-compensating expert (flownav/agents/flow_compensating.py), which reaches the target from there where the
 paper's teacher mostly does not. The crossing the other way (flag 3: Region 2 to Region 1,
 ``task.posed_wake_reverse_share``) goes to an expert of that crossing when one is given (``algo.scene_reverse_expert``,
-e.g. the paper's SI-2 teacher ``checkpoints/teacher_symmetric.pt``), else to the generalist. Outside the paper's
-scene, where the flow is uniform (its gradient in the view exactly zero: a current, still water), the
-flow-compensating expert swims the straight track, and it does better there than the generalist teacher
-(docs/generalist.md).
+e.g. the paper's SI-2 teacher ``checkpoints/teacher_symmetric.pt``), else to the generalist.
 """
 
 from __future__ import annotations
@@ -21,8 +18,8 @@ import torch
 from torch import nn
 
 from flownav.agents.flow_compensating import FlowCompensating
-from flownav.envs.core import SCENE_NONE, SCENE_PAPER, SCENE_REVERSE, SCENE_UPSTREAM
-from flownav.envs.observations import GEO_PRIV_GRADIENT, observation_size
+from flownav.envs.core import SCENE_PAPER, SCENE_REVERSE, SCENE_UPSTREAM
+from flownav.envs.observations import observation_size
 from flownav.errors import CheckpointError
 
 ROUTED_VIEW = "geo_priv_scene"
@@ -32,8 +29,8 @@ EXPERT_VIEW = "geo_sincos"
 
 class SceneRoutedTeacher(nn.Module):
     """The expert of each row's paper-scene code (the view's last entry, flownav.envs.core.paper_scene):
-    ``expert`` for SCENE_PAPER; the flow-compensating expert for SCENE_UPSTREAM and for SCENE_NONE rows whose flow
-    gradient is zero (a uniform flow); ``reverse`` (if given) for SCENE_REVERSE; ``generalist`` elsewhere.
+    ``expert`` for SCENE_PAPER, the flow-compensating expert for SCENE_UPSTREAM, ``reverse`` (if given) for
+    SCENE_REVERSE, ``generalist`` elsewhere.
     ``expert`` and ``reverse`` read the first 9 numbers of the view (``geo_priv`` begins with ``geo_sincos``), the
     other two all but the code."""
 
@@ -45,9 +42,7 @@ class SceneRoutedTeacher(nn.Module):
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         code, view, geo = obs[:, -1:].round(), obs[:, :-1], obs[:, : self.expert_size]
-        uniform = (view[:, GEO_PRIV_GRADIENT] == 0).all(-1, keepdim=True)
-        compensating = (code == SCENE_UPSTREAM) | ((code == SCENE_NONE) & uniform)
-        out = torch.where(compensating, self.upstream(view), self.generalist(view))
+        out = torch.where(code == SCENE_UPSTREAM, self.upstream(view), self.generalist(view))
         if self.reverse is not None:
             out = torch.where(code == SCENE_REVERSE, self.reverse(geo), out)
         return torch.where(code == SCENE_PAPER, self.expert(geo), out)

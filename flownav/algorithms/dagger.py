@@ -40,7 +40,6 @@ from torchrl.data.replay_buffers.samplers import RandomSampler
 
 from flownav.agents.mixture import TeacherStudentMixture
 from flownav.agents.networks import DeterministicPolicy
-from flownav.agents.prior import TURN_SHORT
 from flownav.agents.scene_router import EXPERT_VIEW, ROUTED_VIEW, scene_routed
 from flownav.algorithms.common import eval_metrics, require_finite_update
 from flownav.atomic import atomic_write_text
@@ -194,7 +193,7 @@ def train(cfg, run_dir) -> dict:
         hidden=list(a.hidden),
         activation=str(a.activation),
         prior=student_view if a.get("prior") else None,
-        prior_turn=TURN_SHORT,
+        prior_turn=a.get("prior_turn"),
     ).to(device)
     optim = torch.optim.Adam(student.parameters(), lr=float(a.lr), weight_decay=float(a.weight_decay))
     buffer = TensorDictReplayBuffer(

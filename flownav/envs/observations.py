@@ -102,7 +102,7 @@ def _privileged(s: State) -> Tensor:
 
 
 # Where geo_priv keeps what it adds to geo_sincos (its first 9 entries).
-GEO_PRIV_FLOW, GEO_PRIV_GRADIENT, GEO_PRIV_SWIM_SPEED = slice(9, 12), slice(12, 21), slice(21, 22)
+GEO_PRIV_FLOW, GEO_PRIV_SWIM_SPEED = slice(9, 12), slice(21, 22)
 
 
 def _geo_priv(s: State) -> Tensor:
