@@ -35,6 +35,12 @@ TURN_SHORT, TURN_LEFT_BIASED = "short", "left_biased"
 TURNS = (TURN_SHORT, TURN_LEFT_BIASED)
 
 
+def check_turn(turn: str) -> str:
+    if turn not in TURNS:
+        raise ValueError(f"head-to-target turn {turn!r}: choose one of {TURNS}")
+    return turn
+
+
 def head_to_target(
     d: Tensor,
     theta: Tensor,
@@ -53,10 +59,8 @@ def head_to_target(
     theta_d = torch.atan2(d[..., 1], d[..., 0])
     psi_d = torch.asin((d[..., 2] / dist).clamp(-1, 1))
     err = wrap_angle(theta_d - theta)
-    if turn == TURN_LEFT_BIASED:
+    if check_turn(turn) == TURN_LEFT_BIASED:
         err = torch.sin(err) + 0.5 * (1 - torch.cos(err))
-    elif turn != TURN_SHORT:
-        raise ValueError(f"head-to-target turn {turn!r}: choose one of {TURNS}")
     dtheta = DTHETA_MAX * 0.95 * torch.tanh(3 * err)
     dpsi = DPSI_MAX * 0.95 * torch.tanh(3 * (psi_d - psi))
     facing = (heading_vector(theta, psi) * d).sum(-1) / dist
@@ -88,9 +92,7 @@ class HeadToTargetPrior(nn.Module):
     def __init__(self, view: str, low: Sequence[float], high: Sequence[float], turn: str = TURN_SHORT):
         super().__init__()
         self.view = check_prior_view(view)
-        if turn not in TURNS:
-            raise ValueError(f"head-to-target turn {turn!r}: choose one of {TURNS}")
-        self.turn = turn
+        self.turn = check_turn(turn)
         # The box is in the policy's config; not persistent, so a checkpoint's state_dict is the weights alone.
         self.register_buffer("low", torch.as_tensor(low, dtype=torch.float32), persistent=False)
         self.register_buffer("high", torch.as_tensor(high, dtype=torch.float32), persistent=False)

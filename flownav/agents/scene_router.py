@@ -30,9 +30,8 @@ EXPERT_VIEW = "geo_sincos"
 class SceneRoutedTeacher(nn.Module):
     """The expert of each row's paper-scene code (the view's last entry, flownav.envs.core.paper_scene):
     ``expert`` for SCENE_PAPER, the flow-compensating expert for SCENE_UPSTREAM, ``reverse`` (if given) for
-    SCENE_REVERSE, ``generalist`` elsewhere.
-    ``expert`` and ``reverse`` read the first 9 numbers of the view (``geo_priv`` begins with ``geo_sincos``), the
-    other two all but the code."""
+    SCENE_REVERSE, ``generalist`` elsewhere. ``expert`` and ``reverse`` read the first 9 numbers of the view
+    (``geo_priv`` begins with ``geo_sincos``), the other two all but the code."""
 
     def __init__(self, generalist: nn.Module, expert: nn.Module, u_max: float = 1.0, reverse: nn.Module | None = None):
         super().__init__()
