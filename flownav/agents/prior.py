@@ -28,9 +28,8 @@ from flownav.envs.kinematics import heading_vector, wrap_angle
 # TURN_SHORT: tanh(3 e), the shorter way round. TURN_LEFT_BIASED: tanh(3 f(e)), f(e) = sin e + (1 - cos e) / 2,
 # continuous at e = +-pi but zero only at e = 0, so for e in (-180, -127) degrees it turns left, the long way
 # (up to 53 degrees more). Against a current of 0.8 across the paper's task that detour costs 3.5% of the episodes
-# (96.51% against 99.95%): swimmers drift out of the box while they turn (docs/generalist.md). The policies saved
-# before the choice was recorded were trained on the left-biased rule and keep it (DeterministicPolicy's
-# ``prior_turn``).
+# (96.51% against 99.95%): swimmers drift out of the box while they turn (docs/generalist.md). A policy config
+# without ``prior_turn`` means the left-biased rule (DeterministicPolicy's ``prior_turn``).
 TURN_SHORT, TURN_LEFT_BIASED = "short", "left_biased"
 TURNS = (TURN_SHORT, TURN_LEFT_BIASED)
 
