@@ -117,7 +117,7 @@ def test_head_to_target_holds_the_headwind_it_used_to_drift_out_of():
 
 def test_the_training_config_key_builds_the_prior_it_names():
     """``algo.prior_turn`` (DAgger) and ``algo.actor.prior_turn`` (PPO) accept the rules prior.py has; null is the
-    left-biased rule, recorded as absent, as in the shipped generalist policies."""
+    left-biased rule, recorded as absent."""
     from flownav.agents.actor_critic import make_actor_critic
     from flownav.schema import PRIOR_TURN
 
