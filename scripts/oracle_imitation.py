@@ -30,8 +30,8 @@ import torch
 from omegaconf import OmegaConf
 
 from flownav.agents.networks import DeterministicPolicy
-from flownav.atomic import atomic_write_text
 from flownav.algorithms.dagger import imitation_loss, set_normalizer_from
+from flownav.atomic import atomic_write_text
 from flownav.builders import build_env, build_flow, build_task, compose_config
 from flownav.checkpoint import save_policy_checkpoint
 from flownav.envs.navigation import Status
