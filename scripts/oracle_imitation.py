@@ -1,22 +1,26 @@
-"""Can a reactive policy do what the oracle does in the well-posed ABC test? DAgger with the oracle as the expert.
+"""Can a reactive policy do what the oracle does? DAgger with the oracle as the expert, in one test or a family.
 
     python scripts/oracle_imitation.py --view geo_priv --out /tmp/oracle_imitation_geo_priv.json
     python scripts/oracle_imitation.py --view ego_mem --episodes 256 --iterations 5 --eval-episodes 1000
+    python scripts/oracle_imitation.py --test flow=family_mix task=family --oracle oracle --prior short
 
 The question behind item 7's ABC target (docs/oracle.md): the oracle reaches about 90% of the periodic ABC test by
 planning 20 time units ahead with the true flow; every trained policy so far stays near head-to-target (1-3%).
 If a reactive network trained *in* that test, by imitating the oracle itself, cannot get near it either, the
 target needs memory or planning, not another teacher. This script measures it; it ships nothing.
 
-Each iteration runs ``--episodes`` fresh episodes of the test (flow=abc_periodic task=abc env=abc_periodic) to
-the end. At every step of every running episode the oracle (``oracle_long``'s settings, conf/evaluate/config.yaml)
-labels the state with its action, planned from the env's true state; the behaviour is the oracle's own action with
-probability beta_i = 0.5 ** i (iteration 0: the oracle alone), else the student's. The (view, oracle action) pairs
-are aggregated; the student (an MLP, flownav.agents.networks.DeterministicPolicy) is refitted on all of them (eq. 9,
-the normaliser set to their statistics) and evaluated on the protocol's held-out episodes (seed EVAL_SEED, as
+Each iteration runs ``--episodes`` fresh episodes of the test (``--test``: train.py overrides, by default the
+well-posed ABC test flow=abc_periodic task=abc env=abc_periodic; a flow family gives a teacher over the
+generalist's families) to the end. At every step of every running episode the oracle (``--oracle``: the settings
+of that policy in conf/evaluate/config.yaml, by default ``oracle_long``, the ABC oracle) labels the state with its
+action, planned from the env's true state; the behaviour is the oracle's own action with probability
+beta_i = 0.5 ** i (iteration 0: the oracle alone), else the student's. The (view, oracle action) pairs are
+aggregated; the student (an MLP, flownav.agents.networks.DeterministicPolicy; with ``--prior`` a correction of
+head-to-target, as the generalist teacher's, turning the way it names) is refitted on all of them (eq. 9, the
+normaliser set to their statistics) and evaluated on the protocol's held-out episodes (seed EVAL_SEED, as
 ``python evaluate.py``). Prints one line per iteration and writes them to ``--out`` as JSON; ``--save`` writes the
 student as a policy checkpoint (role ``teacher``: ``python evaluate.py checkpoint=<it>`` runs it, and it can label
-states for a DAgger student).
+states for a DAgger student, alone or as the generalist of a scene-routed teacher).
 """
 
 from __future__ import annotations
@@ -44,10 +48,10 @@ TEST = ["flow=abc_periodic", "task=abc", "env=abc_periodic"]
 COLLECT_SEED = 7_000  # collection episodes: seeds far from the protocol's EVAL_SEED
 
 
-def oracle_settings() -> dict:
-    """The suite's ``oracle_long`` (the ABC oracle)."""
+def oracle_settings(name: str) -> dict:
+    """The settings of the suite's oracle ``name`` (``oracle``: the zoo's; ``oracle_long``: the ABC one)."""
     cfg = OmegaConf.load(REPO_ROOT / "conf" / "evaluate" / "config.yaml")
-    return OmegaConf.to_container(cfg.policies.oracle_long.settings)
+    return OmegaConf.to_container(cfg.policies[name].settings)
 
 
 @torch.inference_mode()
@@ -94,7 +98,10 @@ def fit(student, obs, labels, epochs: int, batch: int, lr: float, gen: torch.Gen
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--test", nargs="+", default=TEST, help="train.py overrides that pose the test (default: ABC)")
+    p.add_argument("--oracle", default="oracle_long", choices=("oracle", "oracle_long"), help="the expert's settings")
     p.add_argument("--view", default="geo_priv", help="the student's observation view")
+    p.add_argument("--prior", default=None, choices=("short", "left_biased"), help="correct head-to-target")
     p.add_argument("--episodes", type=int, default=256, help="collection episodes per iteration")
     p.add_argument("--iterations", type=int, default=5)
     p.add_argument("--eval-episodes", type=int, default=1000)
@@ -108,14 +115,15 @@ def main() -> None:
     torch.manual_seed(0)
     gen = torch.Generator().manual_seed(0)
 
-    cfg = compose_config(TEST)
+    cfg = compose_config(args.test)
     flow = build_flow(cfg.flow)
     task = build_task(cfg.task, flow)
     probe = build_env(cfg.env, flow, task, [args.view], num_envs=1)
     low, high = probe.action_spec.space.low.reshape(-1), probe.action_spec.space.high.reshape(-1)
-    student = DeterministicPolicy(observation_size(args.view), low.tolist(), high.tolist(), hidden=args.hidden)
+    prior = {"prior": args.view, "prior_turn": args.prior} if args.prior else {}
+    student = DeterministicPolicy(observation_size(args.view), low.tolist(), high.tolist(), hidden=args.hidden, **prior)
     spec = EvalSpec(flow, task, cfg.env, args.eval_episodes, chunk_size=args.eval_episodes)
-    settings = oracle_settings()
+    settings = oracle_settings(args.oracle)
 
     rows, all_obs, all_labels = [], [], []
     for i in range(args.iterations):
@@ -139,7 +147,13 @@ def main() -> None:
         }
         rows.append(row)
         print(json.dumps(row), flush=True)
-        record = {"view": args.view, "settings": settings, "args": {k: str(v) for k, v in vars(args).items()}}
+        record = {
+            "view": args.view,
+            "test": args.test,
+            "oracle": args.oracle,
+            "settings": settings,
+            "args": {k: str(v) for k, v in vars(args).items()},
+        }
         if args.out:
             atomic_write_text(args.out, json.dumps({**record, "rows": rows}, indent=1))
         if args.save:
