@@ -79,6 +79,17 @@ def test_the_routed_teacher_hands_the_flagged_rows_to_the_expert():
     assert torch.equal(with_reverse[7], torch.tensor([0.5, 0.0, -0.1])) and torch.equal(with_reverse[:7], out[:7])
 
 
+def test_the_papers_target_from_elsewhere_goes_to_the_away_expert_or_else_the_papers_teacher():
+    generalist, expert = Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9)
+    obs = torch.randn(5, 24)
+    obs[:, -1] = torch.tensor([4.0, 1.0, 0.0, 4.0, 2.0])
+    plain = SceneRoutedTeacher(generalist, expert)(obs)
+    assert torch.equal(plain[[0, 1, 3]], torch.tensor([[0.9, -0.5, 0.0]]).expand(3, 3))
+    away = SceneRoutedTeacher(generalist, expert, away=Constant([0.4, 0.1, 0.2], 23))(obs)  # reads geo_priv
+    assert torch.equal(away[[0, 3]], torch.tensor([[0.4, 0.1, 0.2]]).expand(2, 3))
+    assert torch.equal(away[[1, 2, 4]], plain[[1, 2, 4]])
+
+
 def test_an_episode_that_starts_upstream_in_the_papers_scene_is_coded_2_all_along():
     flow = posed_and_turned_wakes()
     # as a training config sets it (conf/task/family.yaml plus overrides), through the schema and the builder
@@ -93,12 +104,33 @@ def test_an_episode_that_starts_upstream_in_the_papers_scene_is_coded_2_all_alon
     from_upstream = in_posed & (env.state.pos[:, 0] < UPSTREAM_X)
     assert 50 < from_upstream.sum() < 200
     expected = torch.where(from_upstream, 2.0, in_posed.float())
+    assert REGION_1.contains(env.state.pos[in_posed & ~from_upstream]).all()  # the others start in Region 1
     assert torch.equal(td["geo_priv_scene"][:, -1], expected)
     for _ in range(10):  # the code follows the start, not the swimmer: swimming downstream keeps it
         td["action"] = torch.tensor([1.0, 0.0, 0.0]).expand(512, 3)
         td = env.step(td)["next"]
     running = ~td["done"].reshape(-1)
     assert torch.equal(td["geo_priv_scene"][running, -1], expected[running])
+
+
+def test_the_papers_target_from_a_start_beyond_upstream_and_outside_region_1_is_coded_4():
+    cfg = OmegaConf.load(REPO_ROOT / "conf/task/family.yaml")
+    cfg.regions_share, cfg.full_speed_share = 0.0, 1.0
+    cfg.posed_wake_regions_share, cfg.posed_wake_any_start_share = 1.0, 0.5  # the box: the whole shrunk domain
+    env = NavigationEnv(
+        posed_and_turned_wakes(),
+        build_task(cfg, posed_and_turned_wakes()),
+        num_envs=1024,
+        views=("geo_priv_scene",),
+        seed=6,
+    )
+    code, s = env.reset()["geo_priv_scene"][:, -1], env.state
+    in_posed, start = env.flow.params["member"] == 0, s.pos
+    upstream, region_1 = start[:, 0] < UPSTREAM_X, REGION_1.contains(start)
+    away = in_posed & ~upstream & ~region_1
+    assert 100 < away.sum() and 30 < (in_posed & upstream).sum()
+    assert torch.equal(code == 4, away) and torch.equal(code == 2, in_posed & upstream)
+    assert torch.equal(code == 1, in_posed & region_1) and torch.equal(code == 0, ~in_posed)
 
 
 def test_the_crossing_from_region_2_to_region_1_in_the_posed_wake_is_coded_3():
@@ -120,6 +152,11 @@ def test_scene_routing_needs_the_generalist_view_and_one_action_box():
     assert isinstance(routed, SceneRoutedTeacher) and routed.reverse is None
     with pytest.raises(CheckpointError, match="reads 'geo_sincos': pass the generalist teacher"):
         scene_routed(expert, "geo_sincos", {"scene_expert": ("teacher.pt", expert)})
+    away = DeterministicPolicy(23, LOW, HIGH, hidden=[8])
+    routed = scene_routed(
+        generalist, "geo_priv", {"scene_expert": ("t.pt", expert), "scene_away_expert": ("a.pt", away)}
+    )
+    assert routed.away is away and routed.reverse is None
     other = DeterministicPolicy(9, LOW, [2.0, 0.785, 1.571], hidden=[8])
     with pytest.raises(CheckpointError, match="algo.scene_reverse_expert other.pt acts in another action box"):
         scene_routed(

@@ -9,7 +9,10 @@ start upstream of the paper's regions (flag 2: the extended domain, ``task.posed
 flow-compensating expert (flownav/agents/flow_compensating.py), which reaches the target from there where the
 paper's teacher mostly does not. The crossing the other way (flag 3: Region 2 to Region 1,
 ``task.posed_wake_reverse_share``) goes to an expert of that crossing when one is given (``algo.scene_reverse_expert``,
-e.g. the paper's SI-2 teacher ``checkpoints/teacher_symmetric.pt``), else to the generalist.
+e.g. the paper's SI-2 teacher ``checkpoints/teacher_symmetric.pt``), else to the generalist. Episodes of the paper's
+target from any other start (flag 4: the rest of the extended domain, ``posed_wake_any_start_box`` beyond x = 4) go
+to ``algo.scene_away_expert`` when one is given (a ``geo_priv`` checkpoint, e.g. a network that imitates the oracle
+there: scripts/oracle_imitation.py), else to the paper's teacher.
 """
 
 from __future__ import annotations
@@ -18,24 +21,33 @@ import torch
 from torch import nn
 
 from flownav.agents.flow_compensating import FlowCompensating
-from flownav.envs.core import SCENE_PAPER, SCENE_REVERSE, SCENE_UPSTREAM
+from flownav.envs.core import SCENE_AWAY, SCENE_PAPER, SCENE_REVERSE, SCENE_UPSTREAM
 from flownav.envs.observations import observation_size
 from flownav.errors import CheckpointError
 
 ROUTED_VIEW = "geo_priv_scene"
 GENERALIST_VIEW = "geo_priv"
 EXPERT_VIEW = "geo_sincos"
+EXPERT_VIEWS = {"scene_expert": EXPERT_VIEW, "scene_reverse_expert": EXPERT_VIEW, "scene_away_expert": GENERALIST_VIEW}
 
 
 class SceneRoutedTeacher(nn.Module):
     """The expert of each row's paper-scene code (the view's last entry, flownav.envs.core.paper_scene):
     ``expert`` for SCENE_PAPER, the flow-compensating expert for SCENE_UPSTREAM, ``reverse`` (if given) for
-    SCENE_REVERSE, ``generalist`` elsewhere. ``expert`` and ``reverse`` read the first 9 numbers of the view
-    (``geo_priv`` begins with ``geo_sincos``), the other two all but the code."""
+    SCENE_REVERSE, ``away`` (if given; else ``expert``) for SCENE_AWAY, ``generalist`` elsewhere. ``expert`` and
+    ``reverse`` read the first 9 numbers of the view (``geo_priv`` begins with ``geo_sincos``), the others all but
+    the code."""
 
-    def __init__(self, generalist: nn.Module, expert: nn.Module, u_max: float = 1.0, reverse: nn.Module | None = None):
+    def __init__(
+        self,
+        generalist: nn.Module,
+        expert: nn.Module,
+        u_max: float = 1.0,
+        reverse: nn.Module | None = None,
+        away: nn.Module | None = None,
+    ):
         super().__init__()
-        self.generalist, self.expert, self.reverse = generalist, expert, reverse
+        self.generalist, self.expert, self.reverse, self.away = generalist, expert, reverse, away
         self.upstream = FlowCompensating(u_max)
         self.expert_size = observation_size(EXPERT_VIEW)
 
@@ -44,12 +56,15 @@ class SceneRoutedTeacher(nn.Module):
         out = torch.where(code == SCENE_UPSTREAM, self.upstream(view), self.generalist(view))
         if self.reverse is not None:
             out = torch.where(code == SCENE_REVERSE, self.reverse(geo), out)
-        return torch.where(code == SCENE_PAPER, self.expert(geo), out)
+        paper = self.expert(geo)
+        out = torch.where(code == SCENE_AWAY, paper if self.away is None else self.away(view), out)
+        return torch.where(code == SCENE_PAPER, paper, out)
 
 
 def scene_routed(generalist: nn.Module, generalist_view: str, experts: dict) -> SceneRoutedTeacher:
-    """The routed teacher of a ``geo_priv`` generalist and ``geo_sincos`` experts: ``experts`` maps the config key
-    (``algo.scene_expert``, optionally ``algo.scene_reverse_expert``) to (checkpoint name, loaded policy)."""
+    """The routed teacher of a ``geo_priv`` generalist and its experts: ``experts`` maps the config key
+    (``algo.scene_expert``, optionally ``algo.scene_reverse_expert`` and ``algo.scene_away_expert``) to (checkpoint
+    name, loaded policy)."""
     if generalist_view != GENERALIST_VIEW:
         raise CheckpointError(
             f"algo.scene_expert routes between a {GENERALIST_VIEW!r} teacher and the paper's; the teacher checkpoint "
@@ -59,10 +74,11 @@ def scene_routed(generalist: nn.Module, generalist_view: str, experts: dict) -> 
     for key, (name, policy) in experts.items():
         if box(policy) != box(generalist):
             raise CheckpointError(f"algo.{key} {name} acts in another action box than the teacher")
-    reverse = experts.get("scene_reverse_expert")
+    reverse, away = experts.get("scene_reverse_expert"), experts.get("scene_away_expert")
     return SceneRoutedTeacher(
         generalist,
         experts["scene_expert"][1],
         u_max=float(generalist.config["action_high"][0]),
         reverse=reverse[1] if reverse else None,
+        away=away[1] if away else None,
     )

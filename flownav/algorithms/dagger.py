@@ -40,7 +40,7 @@ from torchrl.data.replay_buffers.samplers import RandomSampler
 
 from flownav.agents.mixture import TeacherStudentMixture
 from flownav.agents.networks import DeterministicPolicy
-from flownav.agents.scene_router import EXPERT_VIEW, ROUTED_VIEW, scene_routed
+from flownav.agents.scene_router import EXPERT_VIEWS, ROUTED_VIEW, scene_routed
 from flownav.algorithms.common import eval_metrics, require_finite_update
 from flownav.atomic import atomic_write_text
 from flownav.builders import build_env, build_flow, build_task
@@ -162,18 +162,16 @@ def train(cfg, run_dir) -> dict:
         "teacher_sha256": sha256(resolve(str(cfg.teacher_checkpoint))),
     }
     if a.get("scene_expert"):  # the paper's teacher acts in the paper's scene (flownav/agents/scene_router.py)
-        keys = [k for k in ("scene_expert", "scene_reverse_expert") if a.get(k)]
+        keys = [k for k in EXPERT_VIEWS if a.get(k)]
         experts = {
-            k: (str(a[k]), load_policy(resolve(str(a[k])), expect_obs=EXPERT_VIEW, device=device)[0]) for k in keys
+            k: (str(a[k]), load_policy(resolve(str(a[k])), expect_obs=EXPERT_VIEWS[k], device=device)[0]) for k in keys
         }
         teacher = scene_routed(teacher, teacher_view, experts)
         teacher_view = ROUTED_VIEW
         for k in keys:
             teacher_meta |= {k: str(a[k]), f"{k}_sha256": sha256(resolve(str(a[k])))}
-    elif a.get("scene_reverse_expert"):
-        raise ConfigError(
-            "algo.scene_reverse_expert needs algo.scene_expert: it is one expert of the scene-routed teacher"
-        )
+    elif extra := [k for k in EXPERT_VIEWS if a.get(k)]:
+        raise ConfigError(f"algo.{extra[0]} needs algo.scene_expert: it is one expert of the scene-routed teacher")
     flow = build_flow(cfg.flow, device=device)
     task = build_task(cfg.task, flow)
     env = build_env(

@@ -214,7 +214,7 @@ def sample_episodes(n: int, flow: FlowField, settings: Settings, rng: torch.Gene
         )
         if not bad.any():
             break
-        fresh, _ = settings.task.sample(n, rng, device)
+        fresh, _ = settings.task.sample(n, rng, device, **posed)  # from the slot's own distribution
         start = torch.where(bad[:, None], fresh.to(start), start)
     else:
         raise ConfigError(
@@ -390,15 +390,16 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
 # extended domain's target in 59% of 4,000 episodes, the flow-compensating expert in 96% (docs/generalist.md).
 UPSTREAM_X = 4.0
 # The codes of paper_scene: which expert of a scene-routed teacher labels a swimmer (flownav/agents/scene_router.py).
-SCENE_NONE, SCENE_PAPER, SCENE_UPSTREAM, SCENE_REVERSE = 0, 1, 2, 3
+SCENE_NONE, SCENE_PAPER, SCENE_UPSTREAM, SCENE_REVERSE, SCENE_AWAY = 0, 1, 2, 3, 4
 
 
 def paper_scene(state: Swimmers, flow: FlowField, settings: Settings) -> Tensor:
     """``[B]`` code of the paper's scene: the CFD wake as posed (unturned: no misalignment, a family slot drawn
     without rotation, scaling or background; at strength 1) with the swimmer at its full speed, and
-    SCENE_PAPER: the target in Region 2 (the paper's training task); SCENE_UPSTREAM: the same for an episode that
-    started upstream of ``UPSTREAM_X``; SCENE_REVERSE: from Region 2 to a target in Region 1 (the crossing the other
-    way, paper SI 2); else SCENE_NONE. What the simulator knows and a scene-routed teacher reads."""
+    SCENE_PAPER: the target in Region 2 from a start in Region 1 (the paper's training task); SCENE_UPSTREAM: that
+    target for an episode that started upstream of ``UPSTREAM_X``; SCENE_AWAY: that target from any other start (the
+    rest of the extended domain); SCENE_REVERSE: from Region 2 to a target in Region 1 (the crossing the other way,
+    paper SI 2); else SCENE_NONE. What the simulator knows and a scene-routed teacher reads."""
     slots = torch.arange(state.pos.shape[0], device=state.pos.device)
     if isinstance(flow, FlowFamily):
         posed = flow.wake_as_posed(slots)
@@ -409,7 +410,8 @@ def paper_scene(state: Swimmers, flow: FlowField, settings: Settings) -> Tensor:
     posed = posed & (state.swim_scale == 1)
     forward = posed & REGION_2.contains(state.target)
     reverse = posed & REGION_1.contains(state.target) & REGION_2.contains(state.start)
-    code = torch.where(state.start[:, 0] < UPSTREAM_X, SCENE_UPSTREAM, SCENE_PAPER)
+    code = torch.where(REGION_1.contains(state.start), SCENE_PAPER, SCENE_AWAY)
+    code = torch.where(state.start[:, 0] < UPSTREAM_X, SCENE_UPSTREAM, code)
     code = torch.where(forward, code, SCENE_NONE)
     return torch.where(reverse, SCENE_REVERSE, code)
 
