@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
+import sys
 import time
 from pathlib import Path
 
@@ -43,6 +45,7 @@ from flownav.envs.observations import observation_size
 from flownav.evaluation.oracle import Oracle
 from flownav.evaluation.protocol import EvalSpec, evaluate
 from flownav.paths import REPO_ROOT
+from flownav.provenance import provenance
 
 TEST = ["flow=abc_periodic", "task=abc", "env=abc_periodic"]
 COLLECT_SEED = 7_000  # collection episodes: seeds far from the protocol's EVAL_SEED
@@ -124,6 +127,7 @@ def main() -> None:
     student = DeterministicPolicy(observation_size(args.view), low.tolist(), high.tolist(), hidden=args.hidden, **prior)
     spec = EvalSpec(flow, task, cfg.env, args.eval_episodes, chunk_size=args.eval_episodes)
     settings = oracle_settings(args.oracle)
+    made = provenance("python scripts/oracle_imitation.py " + " ".join(shlex.quote(a) for a in sys.argv[1:]))
 
     rows, all_obs, all_labels = [], [], []
     for i in range(args.iterations):
@@ -148,6 +152,7 @@ def main() -> None:
         rows.append(row)
         print(json.dumps(row), flush=True)
         record = {
+            **made,
             "view": args.view,
             "test": args.test,
             "oracle": args.oracle,
