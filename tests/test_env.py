@@ -485,3 +485,19 @@ def test_flow_strength_scales_each_episode_by_its_own_draw():
             RegionTask(),
             ("geo",),
         )
+
+
+def test_a_rejected_start_is_drawn_again_with_its_own_target():
+    """A start inside the cylinder is redrawn together with its target: every episode keeps the task's distance."""
+    from flownav.envs.tasks import DistanceTask
+
+    still = FunctionFlow(lambda p, t: torch.zeros_like(p), WAKE_BOUNDS, 1.0, obstacles=[Cylinder((0.0, 0.0), 0.5)])
+    task = DistanceTask(Box((-1.5, -1.5, 0.0), (1.5, 1.5, 3.0)), (2.0, 2.5))  # about 1 start in 11 in the cylinder
+    first_draw, _ = task.sample(4096, torch.Generator().manual_seed(0))
+    assert (first_draw[:, :2].norm(dim=-1) < 0.5).sum() > 200
+    env = NavigationEnv(still, task, num_envs=4096, views=("geo",), seed=0)
+    env.reset()
+    start, target = env.state.pos, env.state.target
+    assert not (start[:, :2].norm(dim=-1) < 0.5).any()
+    distance = (target - start).norm(dim=-1)
+    assert distance.min() >= 2.0 - 1e-4 and distance.max() <= 2.5 + 1e-4

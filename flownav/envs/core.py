@@ -196,7 +196,7 @@ def in_obstacle(flow: FlowField, pos: Tensor, idx: Tensor | None = None) -> Tens
 
 def sample_episodes(n: int, flow: FlowField, settings: Settings, rng: torch.Generator, idx=None) -> Episodes:
     """Starts, targets, headings, flow start times and strengths of n new episodes (for the slots ``idx`` of a
-    family flow), drawn from ``rng`` in a fixed order: the task (rejected starts drawn again), theta, psi, t0
+    family flow), drawn from ``rng`` in a fixed order: the task (rejected episodes drawn again), theta, psi, t0
     (random_flow_phase with a periodic flow), the strength."""
     device = rng.device
     base = flow.base if isinstance(flow, RotatedFlow) else flow
@@ -214,8 +214,10 @@ def sample_episodes(n: int, flow: FlowField, settings: Settings, rng: torch.Gene
         )
         if not bad.any():
             break
-        fresh, _ = settings.task.sample(n, rng, device, **posed)  # from the slot's own distribution
+        # a rejected episode is drawn again whole, from its slot's own distribution (a family's posed wake too)
+        fresh, fresh_target = settings.task.sample(n, rng, device, **posed)
         start = torch.where(bad[:, None], fresh.to(start), start)
+        target = torch.where(bad[:, None], fresh_target.to(target), target)
     else:
         raise ConfigError(
             "task= does not fit flow=: after 100 draws some of the task's starts still lie outside the flow's domain, "
