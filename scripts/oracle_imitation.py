@@ -4,10 +4,10 @@
     python scripts/oracle_imitation.py --view ego_mem --episodes 256 --iterations 5 --eval-episodes 1000
     python scripts/oracle_imitation.py --test flow=family_mix task=family --oracle oracle --prior short
 
-The question behind item 7's ABC target (docs/oracle.md): the oracle reaches about 90% of the periodic ABC test by
-planning 20 time units ahead with the true flow; every trained policy so far stays near head-to-target (1-3%).
-If a reactive network trained *in* that test, by imitating the oracle itself, cannot get near it either, the
-target needs memory or planning, not another teacher. This script measures it; it ships nothing.
+The question behind item 7's targets (docs/oracle.md): the oracle reaches about 90% of the periodic ABC test by
+planning 20 time units ahead with the true flow, where every trained policy stays near head-to-target (1-3%). If a
+reactive network trained *in* a test, by imitating the oracle itself, cannot get near it either, the target needs
+memory or planning, not another teacher. This script measures it; it ships nothing.
 
 Each iteration runs ``--episodes`` fresh episodes of the test (``--test``: train.py overrides, by default the
 well-posed ABC test flow=abc_periodic task=abc env=abc_periodic; a flow family gives a teacher over the
@@ -127,7 +127,14 @@ def main() -> None:
     student = DeterministicPolicy(observation_size(args.view), low.tolist(), high.tolist(), hidden=args.hidden, **prior)
     spec = EvalSpec(flow, task, cfg.env, args.eval_episodes, chunk_size=args.eval_episodes)
     settings = oracle_settings(args.oracle)
-    made = provenance("python scripts/oracle_imitation.py " + " ".join(shlex.quote(a) for a in sys.argv[1:]))
+    record = {  # what every output says about how it was made
+        **provenance("python scripts/oracle_imitation.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])),
+        "view": args.view,
+        "test": args.test,
+        "oracle": args.oracle,
+        "settings": settings,
+        "args": {k: str(v) for k, v in vars(args).items()},
+    }
 
     rows, all_obs, all_labels = [], [], []
     for i in range(args.iterations):
@@ -151,14 +158,6 @@ def main() -> None:
         }
         rows.append(row)
         print(json.dumps(row), flush=True)
-        record = {
-            **made,
-            "view": args.view,
-            "test": args.test,
-            "oracle": args.oracle,
-            "settings": settings,
-            "args": {k: str(v) for k, v in vars(args).items()},
-        }
         if args.out:
             atomic_write_text(args.out, json.dumps({**record, "rows": rows}, indent=1))
         if args.save:

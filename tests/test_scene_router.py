@@ -117,13 +117,8 @@ def test_the_papers_target_from_a_start_beyond_upstream_and_outside_region_1_is_
     cfg = OmegaConf.load(REPO_ROOT / "conf/task/family.yaml")
     cfg.regions_share, cfg.full_speed_share = 0.0, 1.0
     cfg.posed_wake_regions_share, cfg.posed_wake_any_start_share = 1.0, 0.5  # the box: the whole shrunk domain
-    env = NavigationEnv(
-        posed_and_turned_wakes(),
-        build_task(cfg, posed_and_turned_wakes()),
-        num_envs=1024,
-        views=("geo_priv_scene",),
-        seed=6,
-    )
+    flow = posed_and_turned_wakes()
+    env = NavigationEnv(flow, build_task(cfg, flow), num_envs=1024, views=("geo_priv_scene",), seed=6)
     code, s = env.reset()["geo_priv_scene"][:, -1], env.state
     in_posed, start = env.flow.params["member"] == 0, s.pos
     upstream, region_1 = start[:, 0] < UPSTREAM_X, REGION_1.contains(start)

@@ -74,11 +74,11 @@ def scene_routed(generalist: nn.Module, generalist_view: str, experts: dict) -> 
     for key, (name, policy) in experts.items():
         if box(policy) != box(generalist):
             raise CheckpointError(f"algo.{key} {name} acts in another action box than the teacher")
-    reverse, away = experts.get("scene_reverse_expert"), experts.get("scene_away_expert")
+    loaded = {key: p for key, (_, p) in experts.items()}
     return SceneRoutedTeacher(
         generalist,
-        experts["scene_expert"][1],
+        loaded["scene_expert"],
         u_max=float(generalist.config["action_high"][0]),
-        reverse=reverse[1] if reverse else None,
-        away=away[1] if away else None,
+        reverse=loaded.get("scene_reverse_expert"),
+        away=loaded.get("scene_away_expert"),
     )
