@@ -140,7 +140,7 @@ class RunCheckpoints:
         return restore_training_state(payload, self.policy, self.optimizer, self.env, self.generators)
 
 
-RESUME_ONLY = ("env", "buffer")  # train_state entries a shipped copy leaves out (only a resumed run reads them)
+RESUME_ONLY = ("env", "buffer", "pairs")  # train_state entries only a resumed run reads: a shipped copy drops them
 
 
 def ship_checkpoint(src, dst) -> Path:

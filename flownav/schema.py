@@ -323,6 +323,8 @@ PPO = {
     "final_eval_episodes": Int(ge=0),
 }
 
+IMITATOR_NET = NETWORK | {"prior": PRIOR, "prior_turn": PRIOR_TURN}  # a DAgger-trained DeterministicPolicy
+
 DAGGER = {
     "iterations": Int(ge=1),
     "num_envs": Int(ge=1),
@@ -335,10 +337,7 @@ DAGGER = {
     "lr_final": Float(gt=0, null=True),
     "weight_decay": Float(ge=0),
     "grad_clip": Float(ge=0),
-    "hidden": Key(INTS, ge=1),
-    "activation": NETWORK["activation"],
-    "prior": PRIOR,
-    "prior_turn": PRIOR_TURN,
+    **IMITATOR_NET,
     "scene_expert": Str(null=True),
     "scene_reverse_expert": Str(null=True),
     "scene_away_expert": Str(null=True),
@@ -346,7 +345,23 @@ DAGGER = {
     "results_json": Str(null=True),
 }
 
-ALGOS = {"ppo": PPO, "dagger": DAGGER}
+ORACLE_DAGGER = {
+    "oracle": Str(choices=("oracle", "oracle_long")),
+    "oracle_settings": {
+        k: Int(ge=1) for k in ("candidates", "horizon", "blocks", "iterations", "elites", "replan_every")
+    },
+    "iterations": Int(ge=1),
+    "episodes": Int(ge=1),
+    "beta_decay": Float(ge=0, le=1),
+    "epochs": Int(ge=1),
+    "batch_size": Int(ge=1),
+    "lr": Float(gt=0),
+    **IMITATOR_NET,
+    "eval_episodes": Int(ge=0),
+    "results_json": Str(null=True),
+}
+
+ALGOS = {"ppo": PPO, "dagger": DAGGER, "oracle_dagger": ORACLE_DAGGER}
 
 RUN = {
     "seed": Int(),

@@ -24,9 +24,14 @@ CONF = REPO_ROOT / "conf"
 BUDGET = {
     "ppo": ("total_frames", "final_eval_episodes"),
     "dagger": ("iterations", "num_envs", "steps_per_iteration", "updates_per_iteration", "final_eval_episodes"),
+    "oracle_dagger": ("iterations", "episodes", "epochs", "eval_episodes"),
 }
 # The counter of last.pt's train_state that says how far a run got, and the setting it must reach.
-PROGRESS = {"ppo": ("frames", "total_frames"), "dagger": ("iteration", "iterations")}
+PROGRESS = {
+    "ppo": ("frames", "total_frames"),
+    "dagger": ("iteration", "iterations"),
+    "oracle_dagger": ("iteration", "iterations"),
+}
 
 
 def is_shipped(path) -> bool:

@@ -88,16 +88,3 @@ def test_the_settings_script_runs_the_suites_abc_tests():
             assert OmegaConf.to_container(mine[key]) == OmegaConf.to_container(entry[key]), (test, key)
         suite_env = Suite(cfg, log=lambda *_: None).env_cfg(entry)
         assert OmegaConf.to_container(mine.env) == OmegaConf.to_container(suite_env), test
-
-
-def test_the_imitation_script_labels_every_state_of_the_oracles_own_episodes():
-    """scripts/oracle_imitation.py with beta = 1 (the oracle acts): the same episodes as the protocol's rollout of
-    the oracle (each status frozen at its end), one label per running slot and step, each the oracle's action."""
-    script = load_module("scripts/oracle_imitation.py")
-    flow = UniformFlow((0.3, 0.0, 0.0), bounds=Box((-4.0, -7.0, 0.0), (22.0, 7.0, 10.0)))
-    make_env = lambda n, chunk: NavigationEnv(flow, RegionTask(), num_envs=n, views=("geo",), seed=3, time_limit=8.0)  # noqa: E731
-    ep = run_episodes(Oracle(**SMALL), "geo", make_env, 6, chunk_size=6)
-    never = lambda obs: torch.full((len(obs), 3), float("nan"))  # noqa: E731  (would poison any step it acted in)
-    obs, labels, status = script.collect(make_env(6, 0), Oracle(**SMALL), never, "geo", 1.0, torch.Generator())
-    assert torch.equal(status, ep.status) and set(status.tolist()) >= {1, 4}  # some reach, some time out
-    assert len(obs) == len(labels) == int((ep.time / 0.2).round().sum()) and torch.isfinite(labels).all()

@@ -12,7 +12,7 @@ paper's teacher mostly does not. The crossing the other way (flag 3: Region 2 to
 e.g. the paper's SI-2 teacher ``checkpoints/teacher_symmetric.pt``), else to the generalist. Episodes of the paper's
 target from any other start (flag 4: the rest of the extended domain, ``posed_wake_any_start_box`` beyond x = 4) go
 to ``algo.scene_away_expert`` when one is given (a ``geo_priv`` checkpoint, e.g. a network that imitates the oracle
-there: scripts/oracle_imitation.py), else to the paper's teacher.
+there: +experiment=generalist_away_expert), else to the paper's teacher.
 """
 
 from __future__ import annotations
