@@ -252,6 +252,7 @@ RESUME_MAY_CHANGE = (
     "device",
     "checkpoint_every",
     "ship",
+    "ship_requires",
     "output_checkpoint",
     "teacher_checkpoint",
     "logger",

@@ -44,11 +44,27 @@ def experiment_budget(name: str, algo: str) -> dict:
     """The budget settings of ``conf/experiment/<name>.yaml``: its own values over those of the experiments it
     builds on (its ``defaults``, in order), over its algo group's."""
     base = OmegaConf.load(CONF / "algo" / f"{algo}.yaml")
-    own = _experiment_algo(name)
+    own = _experiment_section(name, "algo")
     return {k: own.get(k, base.get(k)) for k in BUDGET[algo]}
 
 
-def _experiment_algo(name: str) -> dict:
+def experiment_requirements(name: str) -> dict:
+    """The held-out checks a policy of ``conf/experiment/<name>.yaml`` must pass to be shipped (its
+    ``ship_requires`` over those of the experiments it builds on): check name -> {"overrides": [Hydra overrides
+    of its training flow, task and env], "min_success": the least held-out success}. {} for a run of no
+    experiment."""
+    if not (CONF / "experiment" / f"{name}.yaml").is_file():
+        return {}
+    reqs = _experiment_section(name, "ship_requires")
+    for key, req in reqs.items():
+        if set(req) != {"overrides", "min_success"} or not 0.0 <= float(req["min_success"]) <= 1.0:
+            raise ConfigError(
+                f"ship_requires.{key} of experiment {name}: give {{overrides: [...], min_success: <0..1>}}, got {req}"
+            )
+    return reqs
+
+
+def _experiment_section(name: str, section: str) -> dict:
     exp_file = CONF / "experiment" / f"{name}.yaml"
     if not exp_file.is_file():
         raise ConfigError(
@@ -56,12 +72,21 @@ def _experiment_algo(name: str) -> dict:
             "run python train.py +experiment=<name> ship=true"
         )
     exp = OmegaConf.load(exp_file)
-    algo: dict = {}
+    out: dict = {}
     for parent in exp.get("defaults") or []:
         if isinstance(parent, str) and parent != "_self_":  # another experiment (groups come as overrides)
-            algo.update(_experiment_algo(parent))
-    algo.update(OmegaConf.to_container(exp.get("algo") or OmegaConf.create({})))
-    return algo
+            out.update(_experiment_section(parent, section))
+    out.update(OmegaConf.to_container(exp.get(section) or OmegaConf.create({})))
+    return out
+
+
+def failed_requirements(checks: dict) -> list[str]:
+    """The checks (``{name: {"success_rate", "min_success", ...}}``) a policy failed, as "name (rate < min)"."""
+    return [
+        f"{k} ({c['success_rate']:.4f} < {c['min_success']})"
+        for k, c in checks.items()
+        if not c["success_rate"] >= c["min_success"]
+    ]
 
 
 def require_full_budget(cfg) -> None:
@@ -113,10 +138,24 @@ def train_targets(cfg, multirun: bool) -> dict:
     return targets
 
 
+def refuse_failed_requirements(checks: dict, what, name: str) -> None:
+    """Refuse (one line) to ship ``what`` when it failed one of its experiment's ``ship_requires`` checks."""
+    failed = failed_requirements(checks)
+    if failed:
+        raise ConfigError(
+            f"shipping refused: {what} fails experiment {name}'s ship_requires: {'; '.join(failed)} "
+            f"(conf/experiment/{name}.yaml); nothing was shipped"
+        )
+
+
 def ship_run(run_dir: Path, targets: dict) -> dict:
     """Copy a finished run's policy and results record to the shipped places named by ``targets``."""
+    from flownav.evaluation.selection import requirement_checks
+
     last = Path(run_dir) / "checkpoints" / "last.pt"
-    require_shippable(load_checkpoint(last), last)
+    payload = load_checkpoint(last)
+    require_shippable(payload, last)
+    refuse_failed_requirements(requirement_checks(last), last, payload["meta"]["config"]["name"])
     shipped = {}
     if "checkpoint" in targets:
         shipped["checkpoint"] = str(ship_checkpoint(last, resolve(targets["checkpoint"])))

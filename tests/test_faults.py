@@ -389,6 +389,29 @@ def test_ship_copies_a_finished_run_without_its_resume_state(tmp_path, monkeypat
     assert record.read_bytes() == (tmp_path / "run" / "results.json").read_bytes()
 
 
+def test_ship_refuses_a_finished_run_that_fails_its_experiments_checks(tmp_path, monkeypatch):
+    """ship=true evaluates the experiment's ship_requires first: a failed check ships nothing, names check and rate."""
+    import train
+    from flownav import shipping
+
+    tiny_budget = {"iterations": 1, "num_envs": 16, "steps_per_iteration": 10, "updates_per_iteration": 2}
+    monkeypatch.setattr(shipping, "experiment_budget", lambda name, algo: tiny_budget | {"final_eval_episodes": 0})
+    headwind = ["flow=uniform", "flow.velocity=[0.0,1.5,0.0]", "task=regions", "env.time_limit=10.0"]  # no one arrives
+    monkeypatch.setattr(
+        shipping, "experiment_requirements", lambda name: {"headwind": {"overrides": headwind, "min_success": 0.5}}
+    )
+    out = tmp_path / "ship" / "student.pt"
+    cfg = compose_train(*STUDENT_SMOKE, "ship=true", f"output_checkpoint={out}")
+    with pytest.raises(ConfigError) as refused:
+        train.run(cfg, tmp_path / "run")
+    last = tmp_path / "run" / "checkpoints" / "last.pt"
+    assert str(refused.value) == (
+        f"shipping refused: {last} fails experiment student's ship_requires: headwind (0.0000 < 0.5) "
+        "(conf/experiment/student.yaml); nothing was shipped"
+    )
+    assert last.is_file() and not out.exists()
+
+
 # ----------------------------------------------------------------------------- resume is safe
 def test_resume_accepts_only_a_run_directory_and_writes_nothing_before_its_checks(tmp_path):
     import train

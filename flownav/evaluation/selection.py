@@ -11,6 +11,9 @@
 Each checkpoint is evaluated by :func:`flownav.evaluation.protocol.evaluate` on the flow, task and env
 groups of its own training run (``--override`` changes them), on the held-out seed ``EVAL_SEED``: the
 same episodes ``evaluate.py`` and the suite measure.
+Where its experiment names checks a shipped policy must pass (``ship_requires`` in
+``conf/experiment/<name>.yaml``, e.g. still water and currents for the generalist student), each is measured
+the same way with its overrides, and ``--ship`` takes the best of the seeds that pass them all.
 """
 
 from __future__ import annotations
@@ -49,14 +52,43 @@ def training_spec(payload: dict, episodes: int, overrides=(), chunk_size: int = 
 
 
 def evaluate_checkpoint(path, episodes: int = EPISODES, overrides=(), chunk_size: int = 10_000) -> dict:
-    """The protocol's summary of one checkpoint on its training task, with where it came from."""
+    """The protocol's summary of one checkpoint on its training task, with where it came from and its
+    experiment's ``ship_requires`` checks (``requirements``)."""
     from flownav.checkpoint import load_policy
 
     policy, payload = load_policy(path)
     obs = payload["obs"]
     summary = evaluate(policy, obs, training_spec(payload, episodes, overrides, chunk_size)).summary
     meta = payload.get("meta", {})
-    return summary | {"checkpoint": str(path), "obs": obs, "role": payload["role"], "frames": meta.get("frames")}
+    checks = requirement_checks(path, episodes, overrides, chunk_size)
+    return summary | {
+        "checkpoint": str(path),
+        "obs": obs,
+        "role": payload["role"],
+        "frames": meta.get("frames"),
+        "experiment": meta.get("config", {}).get("name"),
+        "requirements": checks,
+    }
+
+
+def requirement_checks(path, episodes: int = EPISODES, overrides=(), chunk_size: int = 10_000) -> dict:
+    """The held-out success of a checkpoint in each check its experiment requires before shipping
+    (``ship_requires`` of conf/experiment/<name>.yaml; each check's overrides after ``overrides``)."""
+    from flownav.checkpoint import load_policy
+    from flownav.shipping import experiment_requirements
+
+    policy, payload = load_policy(path)
+    name = str(payload.get("meta", {}).get("config", {}).get("name"))
+    checks = {}
+    for key, req in experiment_requirements(name).items():
+        spec = training_spec(payload, episodes, [*overrides, *req["overrides"]], chunk_size)
+        rate = evaluate(policy, payload["obs"], spec).summary["success_rate"]
+        checks[key] = {
+            "overrides": list(req["overrides"]),
+            "min_success": float(req["min_success"]),
+            "success_rate": rate,
+        }
+    return checks
 
 
 def _mean_std(xs):
@@ -71,7 +103,7 @@ def select(args) -> dict:
     """Evaluate ``args.checkpoints``, write ``args.out``, and with ``args.ship`` copy the best one there."""
     from flownav.checkpoint import load_checkpoint, ship_checkpoint
     from flownav.errors import ConfigError
-    from flownav.shipping import is_shipped, require_shippable
+    from flownav.shipping import failed_requirements, is_shipped, require_shippable
 
     if args.ship or is_shipped(args.out):  # refused before the (long) evaluation
         if args.episodes < EPISODES:
@@ -94,8 +126,14 @@ def select(args) -> dict:
         "mean_success_time_mean": mt,
         "runs": runs,
     }
-    if args.ship:  # the rule for every shipped policy: the best seed by held-out success
-        best = max(runs, key=lambda r: r["success_rate"])
+    if args.ship:  # the rule for every shipped policy: the best seed by held-out success of those that pass
+        passing = [r for r in runs if not failed_requirements(r["requirements"])]  # their experiment's checks
+        if not passing:
+            if not is_shipped(args.out):
+                atomic_write_text(args.out, json.dumps(out, indent=2))
+            failed = "; ".join(f"{r['checkpoint']}: {', '.join(failed_requirements(r['requirements']))}" for r in runs)
+            raise ConfigError(f"shipping refused: no checkpoint passes its experiment's ship_requires ({failed})")
+        best = max(passing, key=lambda r: r["success_rate"])
         ship_checkpoint(best["checkpoint"], args.ship)
         out["shipped"] = {"checkpoint": best["checkpoint"], "to": args.ship, "success_rate": best["success_rate"]}
         print(f"shipped {best['checkpoint']} ({best['success_rate']:.4f}) -> {args.ship}")
@@ -103,6 +141,8 @@ def select(args) -> dict:
     print(json.dumps({k: v for k, v in out.items() if k != "runs"}, indent=2))
     for r in runs:
         print(f"{r['checkpoint']}: success {r['success_rate']:.4f}, mean success time {r['mean_success_time']}")
+        for key, c in r["requirements"].items():
+            print(f"  {key}: {c['success_rate']:.4f} (at least {c['min_success']})")
     return out
 
 
@@ -115,7 +155,11 @@ def main(argv=None):
     p.add_argument("--chunk", type=int, default=10_000, help="episodes stepped together")
     p.add_argument("--override", action="append", default=[], help="Hydra override, e.g. flow=vortex_street")
     p.add_argument("--threads", type=int, default=2)
-    p.add_argument("--ship", default=None, help="copy the best checkpoint (held-out success) here, atomically")
+    p.add_argument(
+        "--ship",
+        default=None,
+        help="copy the best checkpoint (held-out success) of those that pass their experiment's checks here",
+    )
     args = p.parse_args(argv)
     from flownav.errors import reported_as_one_line
 

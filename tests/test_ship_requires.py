@@ -1,0 +1,116 @@
+"""What a policy must pass before it ships (``ship_requires`` of its experiment): the selection rule ships the best
+seed among those that pass, refuses when none does, and measures each check on the protocol's episodes."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+
+from flownav import shipping
+from flownav.checkpoint import save_policy_checkpoint
+from flownav.envs.observations import observation_size
+from flownav.evaluation.scripted import HeadToTarget, fit_expert
+from flownav.evaluation.selection import main, requirement_checks
+from flownav.paths import REPO_ROOT
+
+# The training task of these checkpoints: the paper's task in still water, with a time limit that a swimmer at
+# full speed meets and one at a third of it mostly does not.
+STILL = ["flow=uniform", "flow.velocity=[0.0,0.0,0.0]", "task=regions", "env.time_limit=12.0"]
+HEADWIND = ["flow=uniform", "flow.velocity=[0.0,1.5,0.0]"]  # stronger than any swimmer: no one arrives
+CHECKS = {"strict": {"headwind": {"overrides": HEADWIND, "min_success": 0.99}}, "lenient": {}}
+
+
+def policy_file(path, name: str, speed_fraction: float):
+    """A geo network fitted to head-to-target at ``speed_fraction`` of the swim speed, from a run of ``name``."""
+    pol, _ = fit_expert(HeadToTarget(speed_fraction=speed_fraction), obs_dim=observation_size("geo"), hidden=(32, 32))
+    return save_policy_checkpoint(path, pol, "geo", "teacher", meta={"config": {"name": name}})
+
+
+@pytest.fixture(scope="module")
+def seeds(tmp_path_factory):
+    d = tmp_path_factory.mktemp("ship_requires")
+    return policy_file(d / "fast.pt", "strict", 0.98), policy_file(d / "slow.pt", "lenient", 0.33)
+
+
+@pytest.fixture
+def experiments(monkeypatch):
+    """Two experiments by name: "strict" requires the headwind, "lenient" nothing; runs count as finished."""
+    monkeypatch.setattr(shipping, "experiment_requirements", lambda name: CHECKS[name])
+    monkeypatch.setattr(shipping, "require_shippable", lambda payload, what: None)
+
+
+def test_the_best_seed_that_fails_a_check_is_not_shipped(seeds, experiments, tmp_path):
+    fast, slow = seeds
+    out, shipped = tmp_path / "sel.json", tmp_path / "shipped.pt"
+    args = ["--name", "t", "--out", str(out), "--threads", "1", *[a for o in STILL for a in ("--override", o)]]
+    main([str(fast), str(slow), *args, "--ship", str(shipped)])
+    data = json.loads(out.read_text())
+    fast_run, slow_run = data["runs"]
+    assert fast_run["success_rate"] > 0.9 > slow_run["success_rate"]  # the fast seed is the better one ...
+    assert fast_run["requirements"]["headwind"]["success_rate"] == 0.0  # ... and fails its experiment's check
+    assert data["shipped"]["checkpoint"] == str(slow) and torch.equal(
+        torch.load(shipped, weights_only=True)["policy"]["state_dict"]["net.0.weight"],
+        torch.load(slow, weights_only=True)["policy"]["state_dict"]["net.0.weight"],
+    )
+    # No seed passes: nothing is shipped, one line names each seed and the check it failed with its rate.
+    shipped.unlink()
+    with pytest.raises(SystemExit) as stop:
+        main([str(fast), *args, "--ship", str(shipped)])
+    assert stop.value.code == 2 and not shipped.exists()
+    assert json.loads(out.read_text())["runs"][0]["requirements"]["headwind"]["success_rate"] == 0.0
+
+
+def test_no_seed_passing_is_refused_with_the_failed_check_named(seeds, experiments, tmp_path, capsys):
+    fast, _ = seeds
+    with pytest.raises(SystemExit):
+        main(
+            [
+                str(fast),
+                "--name",
+                "t",
+                "--out",
+                str(tmp_path / "s.json"),
+                "--threads",
+                "1",
+                "--ship",
+                str(tmp_path / "x.pt"),
+            ]
+        )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].endswith(
+        f"shipping refused: no checkpoint passes its experiment's ship_requires ({fast}: headwind (0.0000 < 0.99))"
+    )
+
+
+def test_a_check_is_measured_on_the_protocols_episodes(seeds, experiments):
+    """A check's success is evaluate.py's on the same overrides (same episodes, same summary); the check's own
+    overrides come last (the headwind wins over the still water of STILL)."""
+    import evaluate as evaluate_py
+
+    fast, _ = seeds
+    still = requirement_checks(fast, 400, STILL[:-1] + ["env.time_limit=40.0"])["headwind"]
+    assert still["overrides"] == HEADWIND and still["success_rate"] == 0.0
+    CHECKS["strict"]["backwind"] = {"overrides": ["flow.velocity=[0.0,-0.5,0.0]"], "min_success": 0.99}
+    try:
+        rate = requirement_checks(fast, 400, STILL)["backwind"]["success_rate"]
+    finally:
+        del CHECKS["strict"]["backwind"]
+    with initialize_config_dir(config_dir=str(REPO_ROOT / "conf" / "evaluate"), version_base="1.3"):
+        cfg = compose(
+            "config",
+            overrides=[f"checkpoint={fast}", "episodes=400", "progress=false", *STILL, "flow.velocity=[0.0,-0.5,0.0]"],
+        )
+    assert 0.0 < rate == evaluate_py.run(cfg, log=lambda *_: None)["success_rate"]
+
+
+def test_the_generalist_student_ships_only_if_it_holds_still_water_and_every_current():
+    reqs = shipping.experiment_requirements("generalist_student")
+    velocities = {tuple(json.loads(r["overrides"][1].split("=", 1)[1])) for r in reqs.values()}
+    axes = {tuple(s * 0.8 * (i == j) for j in range(3)) for i in range(3) for s in (1, -1)}
+    assert velocities == axes | {(0.0, 0.0, 0.0)} and {r["min_success"] for r in reqs.values()} == {0.99}
+    assert all(r["overrides"][0] == "flow=uniform" and "task=regions" in r["overrides"] for r in reqs.values())
+    assert shipping.experiment_requirements("generalist_student_ego") == reqs  # built on it
+    assert shipping.experiment_requirements("teacher") == {} and shipping.experiment_requirements("nope") == {}
