@@ -68,6 +68,8 @@ _UP = [
     {"name": "cos_psi", "meaning": "cosine of the heading elevation psi", "units": "1"},
 ]
 
+_SWIM_SPEED = {"name": "swim_speed", "meaning": "the swimmer's own full swim speed (its propulsion)", "units": "L/T"}
+
 
 def _geo(vel_meaning: str, sincos: bool) -> list[dict]:
     heading = [*_COS_SIN_THETA, _PSI] if sincos else [_THETA, _PSI]
@@ -104,6 +106,7 @@ VIEW_INPUTS = {
     "ego_flow": lambda: _ego(_FLOW),
     "ego_up": lambda: [*_ego(_VELOCITY), *_UP],
     "ego_mem": lambda: [*_ego(_VELOCITY), *_UP, *_memory()],
+    "ego_mem_speed": lambda: [*_ego(_VELOCITY), *_UP, *_memory(), _SWIM_SPEED],
 }
 
 

@@ -369,7 +369,6 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
         privileged = {
             "flow_gradient": state.flow_grad,
             "target_flow": state.target_flow,
-            "swim_speed": settings.u_max * state.swim_scale,
             "time_left": 1 - state.steps / settings.max_steps,
         }
     if needs_scene(views):
@@ -383,6 +382,7 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
         frame=body_frame(state.theta, state.psi) if needs_body_frame(views) else None,  # skipped for geo-only
         flow_history=flow_history(state) if needs_history(views) else None,
         flow_phase=flow_phase(state, flow) if needs_phase(views) else None,
+        swim_speed=settings.u_max * state.swim_scale,
         **privileged,
     )
     return compute_views(seen, views)

@@ -13,6 +13,9 @@
   student sees one noisy flow sample and cannot tell the stream's direction from a vortex's; the flow
   averaged over about one shedding period can. On board: a velocity sensor minus the own swim command
   gives the flow, a gyro turns past samples into the current frame. Rotations about z leave it unchanged.
+* ``ego_mem_speed`` (9 + 3 K, ours): ``ego_mem`` plus the swimmer's own full swim speed U (the action's full
+  speed times its speed factor): what a robot knows of its own propulsion. Where the families draw weak swimmers
+  the same flow calls for another action at another U, and without it an ego student cannot tell which.
 * ``geo_sincos`` (9, ours): ``geo`` with theta as (cos theta, sin theta). theta wraps at +-pi, which is
   heading straight upstream, the very heading of the wake crossing; the angle jumps there and the
   pair does not. Same information as ``geo``. ``geo_flow_sincos``: the same for ``geo_flow`` (SI 1).
@@ -59,7 +62,7 @@ class State:
     flow_history: Tensor | None = None  # [N, HISTORY_LEN, 3] past flow velocities, inertial; memory views only
     flow_phase: Tensor | None = None  # [N] flow time / period in [0, 1); None: no period (or not asked for)
     flow_gradient: Tensor | None = None  # [N, 3, 3] du_i / dx_j; privileged views only
-    swim_speed: Tensor | None = None  # [N] the swimmer's full swim speed; privileged views only
+    swim_speed: Tensor | None = None  # [N] the swimmer's full swim speed
     time_left: Tensor | None = None  # [N] fraction of the time limit left; privileged views only
     target_flow: Tensor | None = None  # [N, 3] flow velocity at the target; geo_priv_critic only
     paper_scene: Tensor | None = None  # [N] the paper's scene code (core.paper_scene: 0-3); geo_priv_scene only
@@ -86,6 +89,10 @@ def _ego_up(s: State) -> Tensor:
 def _ego_mem(s: State) -> Tensor:
     past = to_body(s.frame, s.flow_history).flatten(1)
     return torch.cat((_ego_up(s), past), -1)
+
+
+def _ego_mem_speed(s: State) -> Tensor:
+    return torch.cat((_ego_mem(s), s.swim_speed[:, None]), -1)
 
 
 def _geo_sincos(s: State, vel: Tensor) -> Tensor:
@@ -126,6 +133,7 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "ego_flow": (6, lambda s: _ego(s, s.flow)),
     "ego_up": (8, _ego_up),
     "ego_mem": (8 + 3 * HISTORY_LEN, _ego_mem),
+    "ego_mem_speed": (9 + 3 * HISTORY_LEN, _ego_mem_speed),
     "geo_sincos": (9, lambda s: _geo_sincos(s, s.velocity)),
     "geo_flow_sincos": (9, lambda s: _geo_sincos(s, s.flow)),
     "privileged": (14, _privileged),
@@ -133,7 +141,7 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "geo_priv_critic": (27, _geo_priv_critic),
     "geo_priv_scene": (24, _geo_priv_scene),
 }
-MEMORY_VIEWS = ("ego_mem",)
+MEMORY_VIEWS = ("ego_mem", "ego_mem_speed")
 PHASE_VIEWS = ("privileged",)
 GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic", "geo_priv_scene")  # the flow's gradient, swim speed and time left
 TARGET_FLOW_VIEWS = ("geo_priv_critic",)
