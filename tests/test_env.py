@@ -126,12 +126,15 @@ def test_ego_views_are_invariant_under_rotation_of_the_scene(phi, seed):
     theta = (torch.rand(n, generator=g, dtype=torch.float64) * 2 - 1) * math.pi
     psi = (torch.rand(n, generator=g, dtype=torch.float64) * 2 - 1) * math.pi / 2
     history = torch.randn(n, HISTORY_LEN, 3, generator=g, dtype=torch.float64)
-    views = ("geo", "ego", "ego_flow", "ego_up", "ego_mem")
-    before = compute_views(State(to_target, vel, flow, theta, psi, body_frame(theta, psi), history), views)
+    speed = torch.rand(n, generator=g, dtype=torch.float64)
+    views = ("geo", "ego", "ego_flow", "ego_up", "ego_mem", "ego_mem_speed")
+    frame = body_frame(theta, psi)
+    before = compute_views(State(to_target, vel, flow, theta, psi, frame, history, swim_speed=speed), views)
     r = lambda v: rotate_z(v, phi)  # noqa: E731
-    rotated = State(r(to_target), r(vel), r(flow), theta + phi, psi, body_frame(theta + phi, psi), r(history))
+    turned = body_frame(theta + phi, psi)
+    rotated = State(r(to_target), r(vel), r(flow), theta + phi, psi, turned, r(history), swim_speed=speed)
     after = compute_views(rotated, views)
-    for view in ("ego", "ego_flow", "ego_up", "ego_mem"):
+    for view in ("ego", "ego_flow", "ego_up", "ego_mem", "ego_mem_speed"):
         assert torch.allclose(before[view], after[view], atol=1e-12), view
     if abs(math.sin(phi / 2)) > 1e-3:  # any rotation but the identity moves the geo view
         assert not torch.allclose(before["geo"], after["geo"], atol=1e-6)

@@ -216,12 +216,20 @@ def test_swim_speed_factor_range_and_the_env_applies_it():
     drawn_ = torch.log(s[s < 1])
     assert drawn_.median() == pytest.approx(0.5 * math.log(0.05), abs=0.05)  # log-uniform: median at the middle
     env = NavigationEnv(
-        UniformFamily(speed=(0, 0)), task=task, num_envs=256, views=("geo_priv",), swim_speed_scale=2.0, seed=0
+        UniformFamily(speed=(0, 0)),
+        task=task,
+        num_envs=256,
+        views=("geo_priv", "ego_mem", "ego_mem_speed"),
+        swim_speed_scale=2.0,
+        seed=0,
     )
     td = env.reset()
     assert env.swim_scale.min() >= 2.0 * 0.05 - 1e-6 and env.swim_scale.max() <= 2.0 + 1e-6
     assert (env.swim_scale == 2.0).any() and (env.swim_scale < 1.0).any()
     assert torch.allclose(td["geo_priv"][:, 21], env.u_max * env.swim_scale)
+    # The ego student that knows its own propulsion: ego_mem, then the same full swim speed.
+    assert torch.equal(td["ego_mem_speed"][:, :-1], td["ego_mem"])
+    assert torch.equal(td["ego_mem_speed"][:, -1], td["geo_priv"][:, 21])
     start = td["position"].clone()
     td["action"] = torch.tensor([1.0, 0.0, 0.0]).expand(256, 3)
     moved = (env.step(td)["next", "position"] - start).norm(dim=-1)
