@@ -15,7 +15,8 @@
   gives the flow, a gyro turns past samples into the current frame. Rotations about z leave it unchanged.
 * ``ego_mem_speed`` (9 + 3 K, ours): ``ego_mem`` plus the swimmer's own full swim speed U (the action's full
   speed times its speed factor): what a robot knows of its own propulsion. Where the families draw weak swimmers
-  the same flow calls for another action at another U, and without it an ego student cannot tell which.
+  the same flow calls for another action at another U, and without it an ego student cannot tell which. (The
+  generalist recipe with it was no better: docs/generalist.md.)
 * ``geo_sincos`` (9, ours): ``geo`` with theta as (cos theta, sin theta). theta wraps at +-pi, which is
   heading straight upstream, the very heading of the wake crossing; the angle jumps there and the
   pair does not. Same information as ``geo``. ``geo_flow_sincos``: the same for ``geo_flow`` (SI 1).
@@ -143,7 +144,7 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
 }
 MEMORY_VIEWS = ("ego_mem", "ego_mem_speed")
 PHASE_VIEWS = ("privileged",)
-GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic", "geo_priv_scene")  # the flow's gradient, swim speed and time left
+GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic", "geo_priv_scene")  # the flow's gradient and time left
 TARGET_FLOW_VIEWS = ("geo_priv_critic",)
 SCENE_VIEWS = ("geo_priv_scene",)
 GEO_VIEWS = tuple(name for name in VIEWS if name.startswith("geo"))  # the teacher's kind: inertial frame
