@@ -13,7 +13,7 @@ from pathlib import Path
 from omegaconf import OmegaConf
 
 from flownav.atomic import atomic_copy
-from flownav.checkpoint import load_checkpoint, ship_checkpoint
+from flownav.checkpoint import load_policy, ship_checkpoint
 from flownav.errors import ConfigError
 from flownav.paths import CHECKPOINT_DIR, DATA_DIR, REPO_ROOT, RESULTS_DIR, resolve
 
@@ -153,9 +153,9 @@ def ship_run(run_dir: Path, targets: dict) -> dict:
     from flownav.evaluation.selection import requirement_checks
 
     last = Path(run_dir) / "checkpoints" / "last.pt"
-    payload = load_checkpoint(last)
+    policy, payload = load_policy(last)
     require_shippable(payload, last)
-    refuse_failed_requirements(requirement_checks(last), last, payload["meta"]["config"]["name"])
+    refuse_failed_requirements(requirement_checks(policy, payload), last, payload["meta"]["config"]["name"])
     shipped = {}
     if "checkpoint" in targets:
         shipped["checkpoint"] = str(ship_checkpoint(last, resolve(targets["checkpoint"])))

@@ -10,7 +10,7 @@ import torch
 from hydra import compose, initialize_config_dir
 
 from flownav import shipping
-from flownav.checkpoint import save_policy_checkpoint
+from flownav.checkpoint import load_policy, save_policy_checkpoint
 from flownav.envs.observations import observation_size
 from flownav.evaluation.scripted import HeadToTarget, fit_expert
 from flownav.evaluation.selection import main, requirement_checks
@@ -91,11 +91,11 @@ def test_a_check_is_measured_on_the_protocols_episodes(seeds, experiments):
     import evaluate as evaluate_py
 
     fast, _ = seeds
-    still = requirement_checks(fast, 400, STILL[:-1] + ["env.time_limit=40.0"])["headwind"]
+    still = requirement_checks(*load_policy(fast), 400, STILL[:-1] + ["env.time_limit=40.0"])["headwind"]
     assert still["overrides"] == HEADWIND and still["success_rate"] == 0.0
     CHECKS["strict"]["backwind"] = {"overrides": ["flow.velocity=[0.0,-0.5,0.0]"], "min_success": 0.99}
     try:
-        rate = requirement_checks(fast, 400, STILL)["backwind"]["success_rate"]
+        rate = requirement_checks(*load_policy(fast), 400, STILL)["backwind"]["success_rate"]
     finally:
         del CHECKS["strict"]["backwind"]
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf" / "evaluate"), version_base="1.3"):

@@ -37,6 +37,7 @@ from flownav.envs.observations import (
     needs_history,
     needs_phase,
     needs_scene,
+    needs_swim_speed,
     needs_target_flow,
 )
 from flownav.envs.reward import RewardConfig, step_reward
@@ -382,7 +383,7 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
         frame=body_frame(state.theta, state.psi) if needs_body_frame(views) else None,  # skipped for geo-only
         flow_history=flow_history(state) if needs_history(views) else None,
         flow_phase=flow_phase(state, flow) if needs_phase(views) else None,
-        swim_speed=settings.u_max * state.swim_scale,
+        swim_speed=settings.u_max * state.swim_scale if needs_swim_speed(views) else None,
         **privileged,
     )
     return compute_views(seen, views)

@@ -145,6 +145,7 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
 MEMORY_VIEWS = ("ego_mem", "ego_mem_speed")
 PHASE_VIEWS = ("privileged",)
 GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic", "geo_priv_scene")  # the flow's gradient and time left
+SWIM_SPEED_VIEWS = (*GRADIENT_VIEWS, "ego_mem_speed")  # the swimmer's own full swim speed
 TARGET_FLOW_VIEWS = ("geo_priv_critic",)
 SCENE_VIEWS = ("geo_priv_scene",)
 GEO_VIEWS = tuple(name for name in VIEWS if name.startswith("geo"))  # the teacher's kind: inertial frame
@@ -164,6 +165,10 @@ def needs_phase(names) -> bool:
 
 def needs_gradient(names) -> bool:
     return any(name in GRADIENT_VIEWS for name in names)
+
+
+def needs_swim_speed(names) -> bool:
+    return any(name in SWIM_SPEED_VIEWS for name in names)
 
 
 def needs_target_flow(names) -> bool:

@@ -60,7 +60,7 @@ def evaluate_checkpoint(path, episodes: int = EPISODES, overrides=(), chunk_size
     obs = payload["obs"]
     summary = evaluate(policy, obs, training_spec(payload, episodes, overrides, chunk_size)).summary
     meta = payload.get("meta", {})
-    checks = requirement_checks(path, episodes, overrides, chunk_size)
+    checks = requirement_checks(policy, payload, episodes, overrides, chunk_size)
     return summary | {
         "checkpoint": str(path),
         "obs": obs,
@@ -71,13 +71,11 @@ def evaluate_checkpoint(path, episodes: int = EPISODES, overrides=(), chunk_size
     }
 
 
-def requirement_checks(path, episodes: int = EPISODES, overrides=(), chunk_size: int = 10_000) -> dict:
-    """The held-out success of a checkpoint in each check its experiment requires before shipping
-    (``ship_requires`` of conf/experiment/<name>.yaml; each check's overrides after ``overrides``)."""
-    from flownav.checkpoint import load_policy
+def requirement_checks(policy, payload: dict, episodes: int = EPISODES, overrides=(), chunk_size: int = 10_000) -> dict:
+    """The held-out success of a loaded checkpoint (``load_policy``) in each check its experiment requires before
+    shipping (``ship_requires`` of conf/experiment/<name>.yaml; each check's overrides after ``overrides``)."""
     from flownav.shipping import experiment_requirements
 
-    policy, payload = load_policy(path)
     name = str(payload.get("meta", {}).get("config", {}).get("name"))
     checks = {}
     for key, req in experiment_requirements(name).items():
