@@ -14,7 +14,7 @@ from flownav.envs.observations import observation_size
 from flownav.envs.tasks import REGION_1, REGION_2, FamilyTask, RegionTask
 from flownav.errors import CheckpointError
 from flownav.flows.base import WAKE_BOUNDS
-from flownav.flows.families import MixtureFamily, TransformedFamily, UniformFamily
+from flownav.flows.families import MixtureFamily, SumFamily, TransformedFamily, UniformFamily
 from flownav.flows.synthetic import synthetic_wake
 from flownav.paths import REPO_ROOT
 
@@ -45,8 +45,11 @@ def test_paper_scene_in_a_family_marks_only_the_posed_wake_member_with_the_paper
     task = FamilyTask(WAKE_BOUNDS, regions_share=0.5, full_speed_share=0.5)
     env, flags = scene_flags(flow, task, n=2048)
     member = env.flow.params["member"]
-    expected = (member == 0) & (env.state.swim_scale == 1) & REGION_2.contains(env.state.target)
-    assert 100 < expected.sum() < 2048 and torch.equal(flags.bool(), expected)
+    papers = (member == 0) & (env.state.swim_scale == 1) & REGION_2.contains(env.state.target)
+    assert 100 < papers.sum() < 2048 and torch.equal((flags >= 1) & (flags <= 4), papers)
+    # every other episode in a wake, turned or posed, is the wake scene (5); the current's are none (0)
+    wake = (member < 2) & ~papers
+    assert 100 < wake.sum() and torch.equal(flags == 5, wake) and torch.equal(flags == 0, member == 2)
     # geo_priv_scene is geo_priv plus the flag
     both = NavigationEnv(flow, task, num_envs=64, views=("geo_priv", "geo_priv_scene"), seed=1).reset()
     assert observation_size("geo_priv_scene") == observation_size("geo_priv") + 1
@@ -103,7 +106,7 @@ def test_an_episode_that_starts_upstream_in_the_papers_scene_is_coded_2_all_alon
     in_posed = env.flow.params["member"] == 0
     from_upstream = in_posed & (env.state.pos[:, 0] < UPSTREAM_X)
     assert 50 < from_upstream.sum() < 200
-    expected = torch.where(from_upstream, 2.0, in_posed.float())
+    expected = torch.where(from_upstream, 2.0, torch.where(in_posed, 1.0, 5.0))  # the turned wake: 5
     assert REGION_1.contains(env.state.pos[in_posed & ~from_upstream]).all()  # the others start in Region 1
     assert torch.equal(td["geo_priv_scene"][:, -1], expected)
     for _ in range(10):  # the code follows the start, not the swimmer: swimming downstream keeps it
@@ -125,7 +128,7 @@ def test_the_papers_target_from_a_start_beyond_upstream_and_outside_region_1_is_
     away = in_posed & ~upstream & ~region_1
     assert 100 < away.sum() and 30 < (in_posed & upstream).sum()
     assert torch.equal(code == 4, away) and torch.equal(code == 2, in_posed & upstream)
-    assert torch.equal(code == 1, in_posed & region_1) and torch.equal(code == 0, ~in_posed)
+    assert torch.equal(code == 1, in_posed & region_1) and torch.equal(code == 5, ~in_posed)
 
 
 def test_the_crossing_from_region_2_to_region_1_in_the_posed_wake_is_coded_3():
@@ -140,6 +143,25 @@ def test_the_crossing_from_region_2_to_region_1_in_the_posed_wake_is_coded_3():
     assert torch.equal(code == 3, back & full) and torch.equal(code == 1, in_posed & ~back & full)
 
 
+def test_a_wake_on_a_current_is_a_wake_scene_and_a_current_alone_is_none():
+    turned = TransformedFamily([synthetic_wake()], angle_deg=(10, 80), strength=(1, 1), background=(0, 0))
+    on_current = SumFamily([turned, UniformFamily()])
+    _, flags = scene_flags(on_current, FamilyTask(WAKE_BOUNDS), n=64)
+    assert flags.eq(5).all()
+    assert scene_flags(UniformFamily(), FamilyTask(WAKE_BOUNDS), n=64)[1].eq(0).all()
+
+
+def test_every_other_wake_episode_goes_to_the_wake_expert_or_else_the_generalist():
+    generalist, expert = Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9)
+    obs = torch.randn(6, 24)
+    obs[:, -1] = torch.tensor([5.0, 0.0, 1.0, 5.0, 4.0, 3.0])
+    plain = SceneRoutedTeacher(generalist, expert)(obs)
+    assert torch.equal(plain[[0, 1, 3, 5]], torch.tensor([[0.1, 0.2, 0.3]]).expand(4, 3))
+    wake = SceneRoutedTeacher(generalist, expert, wake=Constant([0.6, -0.2, 0.4], 23))(obs)  # reads geo_priv
+    assert torch.equal(wake[[0, 3]], torch.tensor([[0.6, -0.2, 0.4]]).expand(2, 3))
+    assert torch.equal(wake[[1, 2, 4, 5]], plain[[1, 2, 4, 5]])
+
+
 def test_scene_routing_needs_the_generalist_view_and_one_action_box():
     generalist = DeterministicPolicy(23, LOW, HIGH, hidden=[8])
     expert = DeterministicPolicy(9, LOW, HIGH, hidden=[8])
@@ -151,7 +173,12 @@ def test_scene_routing_needs_the_generalist_view_and_one_action_box():
     routed = scene_routed(
         generalist, "geo_priv", {"scene_expert": ("t.pt", expert), "scene_away_expert": ("a.pt", away)}
     )
-    assert routed.away is away and routed.reverse is None
+    assert routed.away is away and routed.reverse is None and routed.wake is None
+    wake = DeterministicPolicy(23, LOW, HIGH, hidden=[8])
+    routed = scene_routed(
+        generalist, "geo_priv", {"scene_expert": ("t.pt", expert), "scene_wake_expert": ("w.pt", wake)}
+    )
+    assert routed.wake is wake and routed.away is None
     other = DeterministicPolicy(9, LOW, [2.0, 0.785, 1.571], hidden=[8])
     with pytest.raises(CheckpointError, match="algo.scene_reverse_expert other.pt acts in another action box"):
         scene_routed(

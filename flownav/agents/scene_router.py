@@ -12,7 +12,10 @@ paper's teacher mostly does not. The crossing the other way (flag 3: Region 2 to
 e.g. the paper's SI-2 teacher ``checkpoints/teacher_symmetric.pt``), else to the generalist. Episodes of the paper's
 target from any other start (flag 4: the rest of the extended domain, ``posed_wake_any_start_box`` beyond x = 4) go
 to ``algo.scene_away_expert`` when one is given (a ``geo_priv`` checkpoint, e.g. a network that imitates the oracle
-there: +experiment=generalist_away_expert), else to the paper's teacher.
+there: +experiment=generalist_away_expert), else to the paper's teacher. Every other episode in a CFD wake of the
+families (flag 5: turned, scaled, on a current, or as posed with another task or a weaker swimmer) goes to
+``algo.scene_wake_expert`` when one is given (a ``geo_priv`` checkpoint, e.g. a network that imitates the oracle
+over the wake family: +experiment=generalist_wake_expert), else to the generalist.
 """
 
 from __future__ import annotations
@@ -21,20 +24,26 @@ import torch
 from torch import nn
 
 from flownav.agents.flow_compensating import FlowCompensating
-from flownav.envs.core import SCENE_AWAY, SCENE_PAPER, SCENE_REVERSE, SCENE_UPSTREAM
+from flownav.envs.core import SCENE_AWAY, SCENE_PAPER, SCENE_REVERSE, SCENE_UPSTREAM, SCENE_WAKE
 from flownav.envs.observations import observation_size
 from flownav.errors import CheckpointError
 
 ROUTED_VIEW = "geo_priv_scene"
 GENERALIST_VIEW = "geo_priv"
 EXPERT_VIEW = "geo_sincos"
-EXPERT_VIEWS = {"scene_expert": EXPERT_VIEW, "scene_reverse_expert": EXPERT_VIEW, "scene_away_expert": GENERALIST_VIEW}
+EXPERT_VIEWS = {
+    "scene_expert": EXPERT_VIEW,
+    "scene_reverse_expert": EXPERT_VIEW,
+    "scene_away_expert": GENERALIST_VIEW,
+    "scene_wake_expert": GENERALIST_VIEW,
+}
 
 
 class SceneRoutedTeacher(nn.Module):
     """The expert of each row's paper-scene code (the view's last entry, flownav.envs.core.paper_scene):
     ``expert`` for SCENE_PAPER, the flow-compensating expert for SCENE_UPSTREAM, ``reverse`` (if given) for
-    SCENE_REVERSE, ``away`` (if given; else ``expert``) for SCENE_AWAY, ``generalist`` elsewhere. ``expert`` and
+    SCENE_REVERSE, ``away`` (if given; else ``expert``) for SCENE_AWAY, ``wake`` (if given) for SCENE_WAKE,
+    ``generalist`` elsewhere. ``expert`` and
     ``reverse`` read the first 9 numbers of the view (``geo_priv`` begins with ``geo_sincos``), the others all but
     the code."""
 
@@ -45,9 +54,10 @@ class SceneRoutedTeacher(nn.Module):
         u_max: float = 1.0,
         reverse: nn.Module | None = None,
         away: nn.Module | None = None,
+        wake: nn.Module | None = None,
     ):
         super().__init__()
-        self.generalist, self.expert, self.reverse, self.away = generalist, expert, reverse, away
+        self.generalist, self.expert, self.reverse, self.away, self.wake = generalist, expert, reverse, away, wake
         self.upstream = FlowCompensating(u_max)
         self.expert_size = observation_size(EXPERT_VIEW)
 
@@ -56,6 +66,8 @@ class SceneRoutedTeacher(nn.Module):
         out = torch.where(code == SCENE_UPSTREAM, self.upstream(view), self.generalist(view))
         if self.reverse is not None:
             out = torch.where(code == SCENE_REVERSE, self.reverse(geo), out)
+        if self.wake is not None:
+            out = torch.where(code == SCENE_WAKE, self.wake(view), out)
         paper = self.expert(geo)
         out = torch.where(code == SCENE_AWAY, paper if self.away is None else self.away(view), out)
         return torch.where(code == SCENE_PAPER, paper, out)
@@ -63,7 +75,8 @@ class SceneRoutedTeacher(nn.Module):
 
 def scene_routed(generalist: nn.Module, generalist_view: str, experts: dict) -> SceneRoutedTeacher:
     """The routed teacher of a ``geo_priv`` generalist and its experts: ``experts`` maps the config key
-    (``algo.scene_expert``, optionally ``algo.scene_reverse_expert`` and ``algo.scene_away_expert``) to (checkpoint
+    (``algo.scene_expert``, optionally ``algo.scene_reverse_expert``, ``algo.scene_away_expert`` and
+    ``algo.scene_wake_expert``) to (checkpoint
     name, loaded policy)."""
     if generalist_view != GENERALIST_VIEW:
         raise CheckpointError(
@@ -81,4 +94,5 @@ def scene_routed(generalist: nn.Module, generalist_view: str, experts: dict) -> 
         u_max=float(generalist.config["action_high"][0]),
         reverse=loaded.get("scene_reverse_expert"),
         away=loaded.get("scene_away_expert"),
+        wake=loaded.get("scene_wake_expert"),
     )

@@ -134,6 +134,11 @@ class FlowFamily(FlowField):
         strength 1, no background): the paper's scene for the privileged ``geo_priv_scene`` view. None here."""
         return torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
 
+    def holds_obstacle(self, idx: Tensor) -> Tensor:
+        """Which of the slots ``idx`` hold a flow with an obstacle (a CFD wake, however turned, scaled or carried):
+        the wake scene of the privileged ``geo_priv_scene`` view. None here."""
+        return torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
+
     # ---- what members implement
     def draw(self, n: int, generator: torch.Generator, device) -> dict[str, Tensor]:  # pragma: no cover
         raise NotImplementedError
@@ -291,11 +296,14 @@ class TransformedFamily(FlowFamily):
         u = _rotate(u, p["cos"], p["sin"]) * p["strength"][:, None]
         return u + p["background"].to(pos.dtype)
 
+    def holds_obstacle(self, idx):
+        solid = torch.tensor([bool(getattr(b, "obstacles", ())) for b in self.bases], device=idx.device)
+        return solid[self.params["base"][idx]]
+
     def wake_as_posed(self, idx):
         p = {key: value[idx] for key, value in self.params.items()}
-        solid = torch.tensor([bool(getattr(b, "obstacles", ())) for b in self.bases], device=idx.device)
         unturned = (p["cos"] == 1) & (p["sin"] == 0)
-        return solid[p["base"]] & unturned & (p["strength"] == 1) & (p["background"] == 0).all(-1)
+        return self.holds_obstacle(idx) & unturned & (p["strength"] == 1) & (p["background"] == 0).all(-1)
 
     def in_obstacle(self, pos, idx=None):
         p = self.slot_params(pos, idx)
@@ -338,6 +346,11 @@ class MixtureFamily(FlowFamily):
         posed = torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
         return _route(member, len(self.members), lambda j, rows: self.members[j].wake_as_posed(idx[rows]), posed)
 
+    def holds_obstacle(self, idx):
+        member = self.params["member"][idx]
+        solid = torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
+        return _route(member, len(self.members), lambda j, rows: self.members[j].holds_obstacle(idx[rows]), solid)
+
 
 class SumFamily(FlowFamily):
     """The superposition of its members' flows, each drawn independently per slot."""
@@ -360,6 +373,12 @@ class SumFamily(FlowFamily):
         for m in self.members:
             hit |= m.in_obstacle(pos, idx)
         return hit
+
+    def holds_obstacle(self, idx):
+        solid = torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
+        for m in self.members:
+            solid |= m.holds_obstacle(idx)
+        return solid
 
 
 def wake_family(wake: FlowField, **kwargs) -> TransformedFamily:
