@@ -175,7 +175,11 @@ CASES = [
         train_case("obs.view=sonar"),
         "obs.view is 'sonar'; choose one of ['ego', 'ego_flow', 'ego_mem', 'ego_mem_speed', 'ego_up', 'geo', 'geo_flow', 'geo_flow_sincos', 'geo_priv', 'geo_priv_critic', 'geo_priv_scene', 'geo_sincos', 'privileged']",
     ),
-    ("algo_unknown", train_case("algo.name=sac"), "algo.name is 'sac'; choose one of ['dagger', 'oracle_dagger', 'ppo']"),
+    (
+        "algo_unknown",
+        train_case("algo.name=sac"),
+        "algo.name is 'sac'; choose one of ['dagger', 'oracle_dagger', 'ppo']",
+    ),
     (
         "wandb_mode",
         train_case("logger.wandb.mode=sometimes"),
