@@ -342,6 +342,7 @@ DAGGER = {
     "scene_reverse_expert": Str(null=True),
     "scene_away_expert": Str(null=True),
     "scene_wake_expert": Str(null=True),
+    "scene_currents": Bool(),
     "final_eval_episodes": Int(ge=0),
     "results_json": Str(null=True),
 }

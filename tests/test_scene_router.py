@@ -47,9 +47,11 @@ def test_paper_scene_in_a_family_marks_only_the_posed_wake_member_with_the_paper
     member = env.flow.params["member"]
     papers = (member == 0) & (env.state.swim_scale == 1) & REGION_2.contains(env.state.target)
     assert 100 < papers.sum() < 2048 and torch.equal((flags >= 1) & (flags <= 4), papers)
-    # every other episode in a wake, turned or posed, is the wake scene (5); the current's are none (0)
-    wake = (member < 2) & ~papers
-    assert 100 < wake.sum() and torch.equal(flags == 5, wake) and torch.equal(flags == 0, member == 2)
+    # every other full-speed episode in a wake, turned or posed, is the wake scene (5); a current's are 6
+    full = env.state.swim_scale == 1
+    wake = (member < 2) & ~papers & full
+    assert 100 < wake.sum() and torch.equal(flags == 5, wake) and torch.equal(flags == 6, member == 2)
+    assert torch.equal(flags == 0, (member < 2) & ~full)  # a weaker swimmer in a wake: none
     # geo_priv_scene is geo_priv plus the flag
     both = NavigationEnv(flow, task, num_envs=64, views=("geo_priv", "geo_priv_scene"), seed=1).reset()
     assert observation_size("geo_priv_scene") == observation_size("geo_priv") + 1
@@ -143,12 +145,13 @@ def test_the_crossing_from_region_2_to_region_1_in_the_posed_wake_is_coded_3():
     assert torch.equal(code == 3, back & full) and torch.equal(code == 1, in_posed & ~back & full)
 
 
-def test_a_wake_on_a_current_is_a_wake_scene_and_a_current_alone_is_none():
+def test_a_wake_on_a_current_is_a_wake_scene_and_currents_alone_are_the_current_scene():
     turned = TransformedFamily([synthetic_wake()], angle_deg=(10, 80), strength=(1, 1), background=(0, 0))
     on_current = SumFamily([turned, UniformFamily()])
-    _, flags = scene_flags(on_current, FamilyTask(WAKE_BOUNDS), n=64)
-    assert flags.eq(5).all()
-    assert scene_flags(UniformFamily(), FamilyTask(WAKE_BOUNDS), n=64)[1].eq(0).all()
+    env, flags = scene_flags(on_current, FamilyTask(WAKE_BOUNDS), n=64)
+    full = env.state.swim_scale == 1
+    assert 0 < full.sum() < 64 and torch.equal(flags, torch.where(full, 5.0, 0.0))
+    assert scene_flags(SumFamily([UniformFamily(), UniformFamily()]), FamilyTask(WAKE_BOUNDS), n=64)[1].eq(6).all()
 
 
 def test_every_other_wake_episode_goes_to_the_wake_expert_or_else_the_generalist():
@@ -160,6 +163,17 @@ def test_every_other_wake_episode_goes_to_the_wake_expert_or_else_the_generalist
     wake = SceneRoutedTeacher(generalist, expert, wake=Constant([0.6, -0.2, 0.4], 23))(obs)  # reads geo_priv
     assert torch.equal(wake[[0, 3]], torch.tensor([[0.6, -0.2, 0.4]]).expand(2, 3))
     assert torch.equal(wake[[1, 2, 4, 5]], plain[[1, 2, 4, 5]])
+
+
+def test_currents_go_to_the_flow_compensating_expert_when_asked():
+    generalist, expert = Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9)
+    obs = torch.randn(4, 24)
+    obs[:, -1] = torch.tensor([6.0, 0.0, 6.0, 5.0])
+    plain = SceneRoutedTeacher(generalist, expert)(obs)
+    assert torch.equal(plain, torch.tensor([[0.1, 0.2, 0.3]]).expand(4, 3))
+    routed = SceneRoutedTeacher(generalist, expert, currents=True)(obs)
+    assert torch.equal(routed[[0, 2]], FlowCompensating()(obs[[0, 2], :-1]))
+    assert torch.equal(routed[[1, 3]], plain[[1, 3]])
 
 
 def test_scene_routing_needs_the_generalist_view_and_one_action_box():

@@ -15,7 +15,10 @@ to ``algo.scene_away_expert`` when one is given (a ``geo_priv`` checkpoint, e.g.
 there: +experiment=generalist_away_expert), else to the paper's teacher. Every other episode in a CFD wake of the
 families (flag 5: turned, scaled, on a current, or as posed with another task or a weaker swimmer) goes to
 ``algo.scene_wake_expert`` when one is given (a ``geo_priv`` checkpoint, e.g. a network that imitates the oracle
-over the wake family: +experiment=generalist_wake_expert), else to the generalist.
+over the wake family: +experiment=generalist_wake_expert), else to the generalist; only full-speed swimmers are
+flagged there (a weaker swimmer's wake episode keeps flag 0). Episodes in a uniform current or still water of the
+families (flag 6) go to the flow-compensating expert with ``algo.scene_currents`` (there it swims the straight,
+fastest track), else to the generalist.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ import torch
 from torch import nn
 
 from flownav.agents.flow_compensating import FlowCompensating
-from flownav.envs.core import SCENE_AWAY, SCENE_PAPER, SCENE_REVERSE, SCENE_UPSTREAM, SCENE_WAKE
+from flownav.envs.core import SCENE_AWAY, SCENE_CURRENT, SCENE_PAPER, SCENE_REVERSE, SCENE_UPSTREAM, SCENE_WAKE
 from flownav.envs.observations import observation_size
 from flownav.errors import CheckpointError
 
@@ -42,8 +45,8 @@ EXPERT_VIEWS = {
 class SceneRoutedTeacher(nn.Module):
     """The expert of each row's paper-scene code (the view's last entry, flownav.envs.core.paper_scene):
     ``expert`` for SCENE_PAPER, the flow-compensating expert for SCENE_UPSTREAM, ``reverse`` (if given) for
-    SCENE_REVERSE, ``away`` (if given; else ``expert``) for SCENE_AWAY, ``wake`` (if given) for SCENE_WAKE,
-    ``generalist`` elsewhere. ``expert`` and
+    SCENE_REVERSE, ``away`` (if given; else ``expert``) for SCENE_AWAY, ``wake`` (if given) for SCENE_WAKE, the
+    flow-compensating expert for SCENE_CURRENT if ``currents``, ``generalist`` elsewhere. ``expert`` and
     ``reverse`` read the first 9 numbers of the view (``geo_priv`` begins with ``geo_sincos``), the others all but
     the code."""
 
@@ -55,15 +58,18 @@ class SceneRoutedTeacher(nn.Module):
         reverse: nn.Module | None = None,
         away: nn.Module | None = None,
         wake: nn.Module | None = None,
+        currents: bool = False,
     ):
         super().__init__()
         self.generalist, self.expert, self.reverse, self.away, self.wake = generalist, expert, reverse, away, wake
+        self.currents = currents
         self.upstream = FlowCompensating(u_max)
         self.expert_size = observation_size(EXPERT_VIEW)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         code, view, geo = obs[:, -1:].round(), obs[:, :-1], obs[:, : self.expert_size]
-        out = torch.where(code == SCENE_UPSTREAM, self.upstream(view), self.generalist(view))
+        compensating = (code == SCENE_UPSTREAM) | ((code == SCENE_CURRENT) & self.currents)
+        out = torch.where(compensating, self.upstream(view), self.generalist(view))
         if self.reverse is not None:
             out = torch.where(code == SCENE_REVERSE, self.reverse(geo), out)
         if self.wake is not None:
@@ -73,11 +79,13 @@ class SceneRoutedTeacher(nn.Module):
         return torch.where(code == SCENE_PAPER, paper, out)
 
 
-def scene_routed(generalist: nn.Module, generalist_view: str, experts: dict) -> SceneRoutedTeacher:
+def scene_routed(
+    generalist: nn.Module, generalist_view: str, experts: dict, currents: bool = False
+) -> SceneRoutedTeacher:
     """The routed teacher of a ``geo_priv`` generalist and its experts: ``experts`` maps the config key
     (``algo.scene_expert``, optionally ``algo.scene_reverse_expert``, ``algo.scene_away_expert`` and
     ``algo.scene_wake_expert``) to (checkpoint
-    name, loaded policy)."""
+    name, loaded policy); ``currents``: ``algo.scene_currents``."""
     if generalist_view != GENERALIST_VIEW:
         raise CheckpointError(
             f"algo.scene_expert routes between a {GENERALIST_VIEW!r} teacher and the paper's; the teacher checkpoint "
@@ -95,4 +103,5 @@ def scene_routed(generalist: nn.Module, generalist_view: str, experts: dict) -> 
         reverse=loaded.get("scene_reverse_expert"),
         away=loaded.get("scene_away_expert"),
         wake=loaded.get("scene_wake_expert"),
+        currents=currents,
     )

@@ -393,7 +393,7 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
 # extended domain's target in 59% of 4,000 episodes, the flow-compensating expert in 96% (docs/generalist.md).
 UPSTREAM_X = 4.0
 # The codes of paper_scene: which expert of a scene-routed teacher labels a swimmer (flownav/agents/scene_router.py).
-SCENE_NONE, SCENE_PAPER, SCENE_UPSTREAM, SCENE_REVERSE, SCENE_AWAY, SCENE_WAKE = 0, 1, 2, 3, 4, 5
+SCENE_NONE, SCENE_PAPER, SCENE_UPSTREAM, SCENE_REVERSE, SCENE_AWAY, SCENE_WAKE, SCENE_CURRENT = 0, 1, 2, 3, 4, 5, 6
 
 
 def paper_scene(state: Swimmers, flow: FlowField, settings: Settings) -> Tensor:
@@ -402,23 +402,26 @@ def paper_scene(state: Swimmers, flow: FlowField, settings: Settings) -> Tensor:
     SCENE_PAPER: the target in Region 2 from a start in Region 1 (the paper's training task); SCENE_UPSTREAM: that
     target for an episode that started upstream of ``UPSTREAM_X``; SCENE_AWAY: that target from any other start (the
     rest of the extended domain); SCENE_REVERSE: from Region 2 to a target in Region 1 (the crossing the other way,
-    paper SI 2); SCENE_WAKE: any other episode in a family slot whose flow is a CFD wake (turned, scaled, on a
-    current, or as posed with another task or a weaker swimmer); else SCENE_NONE. What the simulator knows and a
-    scene-routed teacher reads."""
+    paper SI 2); SCENE_WAKE: any other episode of a full-speed swimmer in a family slot whose flow is a CFD wake
+    (turned, scaled, on a current, or as posed with another task); SCENE_CURRENT: an episode in a family slot
+    whose flow is a uniform current or still water; else SCENE_NONE. What the simulator knows and a scene-routed
+    teacher reads."""
     slots = torch.arange(state.pos.shape[0], device=state.pos.device)
     if isinstance(flow, FlowFamily):
-        posed, wake = flow.wake_as_posed(slots), flow.holds_obstacle(slots)
+        posed, wake, current = flow.wake_as_posed(slots), flow.holds_obstacle(slots), flow.holds_uniform(slots)
     else:  # a misaligned scene is a RotatedFlow, not the dataset's GridFlow
         posed = torch.full_like(slots, isinstance(flow, GridFlow) and bool(flow.obstacles), dtype=torch.bool)
-        wake = torch.zeros_like(posed)
+        wake = current = torch.zeros_like(posed)
     if settings.flow_strength is not None:
         posed = posed & (state.strength == 1)
-    posed = posed & (state.swim_scale == 1)
+    full = state.swim_scale == 1
+    posed, wake = posed & full, wake & full
     forward = posed & REGION_2.contains(state.target)
     reverse = posed & REGION_1.contains(state.target) & REGION_2.contains(state.start)
     code = torch.where(REGION_1.contains(state.start), SCENE_PAPER, SCENE_AWAY)
     code = torch.where(state.start[:, 0] < UPSTREAM_X, SCENE_UPSTREAM, code)
-    code = torch.where(forward, code, torch.where(wake, SCENE_WAKE, SCENE_NONE))
+    other = torch.where(wake, SCENE_WAKE, torch.where(current, SCENE_CURRENT, SCENE_NONE))
+    code = torch.where(forward, code, other)
     return torch.where(reverse, SCENE_REVERSE, code)
 
 

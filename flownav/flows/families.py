@@ -139,6 +139,11 @@ class FlowFamily(FlowField):
         the wake scene of the privileged ``geo_priv_scene`` view. None here."""
         return torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
 
+    def holds_uniform(self, idx: Tensor) -> Tensor:
+        """Which of the slots ``idx`` hold a uniform current (or still water): the current scene of the privileged
+        ``geo_priv_scene`` view. None here."""
+        return torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
+
     # ---- what members implement
     def draw(self, n: int, generator: torch.Generator, device) -> dict[str, Tensor]:  # pragma: no cover
         raise NotImplementedError
@@ -230,6 +235,9 @@ class UniformFamily(FlowFamily):
 
     def evaluate(self, pos, t, p):
         return p["velocity"].to(pos.dtype).expand_as(pos).clone()
+
+    def holds_uniform(self, idx):
+        return torch.ones(idx.shape[0], dtype=torch.bool, device=idx.device)
 
 
 def _rotate(vec: Tensor, cos: Tensor, sin: Tensor) -> Tensor:
@@ -351,6 +359,11 @@ class MixtureFamily(FlowFamily):
         solid = torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
         return _route(member, len(self.members), lambda j, rows: self.members[j].holds_obstacle(idx[rows]), solid)
 
+    def holds_uniform(self, idx):
+        member = self.params["member"][idx]
+        uniform = torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
+        return _route(member, len(self.members), lambda j, rows: self.members[j].holds_uniform(idx[rows]), uniform)
+
 
 class SumFamily(FlowFamily):
     """The superposition of its members' flows, each drawn independently per slot."""
@@ -379,6 +392,12 @@ class SumFamily(FlowFamily):
         for m in self.members:
             solid |= m.holds_obstacle(idx)
         return solid
+
+    def holds_uniform(self, idx):
+        uniform = torch.ones(idx.shape[0], dtype=torch.bool, device=idx.device)
+        for m in self.members:
+            uniform &= m.holds_uniform(idx)
+        return uniform
 
 
 def wake_family(wake: FlowField, **kwargs) -> TransformedFamily:
