@@ -13,7 +13,7 @@ e.g. the paper's SI-2 teacher ``checkpoints/teacher_symmetric.pt``), else to the
 target from any other start (flag 4: the rest of the extended domain, ``posed_wake_any_start_box`` beyond x = 4) go
 to ``algo.scene_away_expert`` when one is given (a ``geo_priv`` checkpoint, e.g. a network that imitates the oracle
 there: +experiment=generalist_away_expert), else to the paper's teacher. Every other episode in a CFD wake of the
-families (flag 5: turned, scaled, on a current, or as posed with another task or a weaker swimmer) goes to
+families (flag 5: turned, scaled, on a current, or as posed with another task) goes to
 ``algo.scene_wake_expert`` when one is given (a ``geo_priv`` checkpoint, e.g. a network that imitates the oracle
 over the wake family: +experiment=generalist_wake_expert), else to the generalist; only full-speed swimmers are
 flagged there (a weaker swimmer's wake episode keeps flag 0). Episodes in a uniform current or still water of the
@@ -84,8 +84,7 @@ def scene_routed(
 ) -> SceneRoutedTeacher:
     """The routed teacher of a ``geo_priv`` generalist and its experts: ``experts`` maps the config key
     (``algo.scene_expert``, optionally ``algo.scene_reverse_expert``, ``algo.scene_away_expert`` and
-    ``algo.scene_wake_expert``) to (checkpoint
-    name, loaded policy); ``currents``: ``algo.scene_currents``."""
+    ``algo.scene_wake_expert``) to (checkpoint name, loaded policy); ``currents``: ``algo.scene_currents``."""
     if generalist_view != GENERALIST_VIEW:
         raise CheckpointError(
             f"algo.scene_expert routes between a {GENERALIST_VIEW!r} teacher and the paper's; the teacher checkpoint "
