@@ -268,6 +268,7 @@ class TransformedFamily(FlowFamily):
         # A base without a period starts at a time drawn in [0, time_offset); a periodic one in [0, period).
         spans = [b.period or float(time_offset) for b in self.bases]
         self.spans = torch.tensor(spans)
+        self.solid = torch.tensor([bool(getattr(b, "obstacles", ())) for b in self.bases])  # which bases have one
         self.max_speed = max(b.max_speed for b in self.bases) * self.strength[1] + self.background[1]
 
     def to(self, device):
@@ -305,8 +306,7 @@ class TransformedFamily(FlowFamily):
         return u + p["background"].to(pos.dtype)
 
     def holds_obstacle(self, idx):
-        solid = torch.tensor([bool(getattr(b, "obstacles", ())) for b in self.bases], device=idx.device)
-        return solid[self.params["base"][idx]]
+        return self.solid.to(idx.device)[self.params["base"][idx]]
 
     def wake_as_posed(self, idx):
         p = {key: value[idx] for key, value in self.params.items()}
@@ -350,19 +350,19 @@ class MixtureFamily(FlowFamily):
         return _route(member, len(self.members), lambda j, r: self.members[j].in_obstacle(pos[r], slots[r]), hit)
 
     def wake_as_posed(self, idx):
-        member = self.params["member"][idx]
-        posed = torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
-        return _route(member, len(self.members), lambda j, rows: self.members[j].wake_as_posed(idx[rows]), posed)
+        return self._member_flag("wake_as_posed", idx)
 
     def holds_obstacle(self, idx):
-        member = self.params["member"][idx]
-        solid = torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
-        return _route(member, len(self.members), lambda j, rows: self.members[j].holds_obstacle(idx[rows]), solid)
+        return self._member_flag("holds_obstacle", idx)
 
     def holds_uniform(self, idx):
+        return self._member_flag("holds_uniform", idx)
+
+    def _member_flag(self, name: str, idx: Tensor) -> Tensor:
+        """A per-slot flag (``wake_as_posed``, ``holds_obstacle``, ``holds_uniform``) of each slot's member."""
         member = self.params["member"][idx]
-        uniform = torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
-        return _route(member, len(self.members), lambda j, rows: self.members[j].holds_uniform(idx[rows]), uniform)
+        flag = torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
+        return _route(member, len(self.members), lambda j, rows: getattr(self.members[j], name)(idx[rows]), flag)
 
 
 class SumFamily(FlowFamily):
