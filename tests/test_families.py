@@ -130,6 +130,19 @@ def test_the_zero_current_member_is_still_water():
     assert cur.params["velocity"].mean(0).norm() < 0.05
 
 
+def test_a_share_of_the_currents_runs_vertically_both_ways():
+    velocity = drawn(UniformFamily(speed=(0.5, 1.0), vertical_share=0.5), 4000).params["velocity"]
+    vertical = velocity[:, :2].abs().sum(-1) == 0
+    assert 0.45 < vertical.float().mean() < 0.55
+    assert 0.45 < (velocity[vertical, 2] > 0).float().mean() < 0.55
+    assert velocity[vertical, 2].abs().min() >= 0.5
+    # The other draws are those of the family without the option (it draws nothing at share 0).
+    plain = drawn(UniformFamily(speed=(0.5, 1.0)), 4000).params["velocity"]
+    assert torch.equal(plain, drawn(UniformFamily(speed=(0.5, 1.0), vertical_share=0.0), 4000).params["velocity"])
+    with pytest.raises(ValueError, match=r"vertical_share is a fraction in \[0, 1\], got 1.5"):
+        UniformFamily(vertical_share=1.5)
+
+
 def test_transformed_family_rotates_scales_and_moves_obstacles():
     base = UniformFlow((1.0, 0.0, 0.0))
     base.obstacles = (Cylinder((0.0, 0.0), 0.5),)

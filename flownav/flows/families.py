@@ -19,7 +19,8 @@ Members (parameter ranges are the constructor's arguments; ``conf/flow/family_*.
   uniform in +-``frequency``. The amplitudes are scaled so that the space-time RMS speed
   sqrt(sum A_k^2) equals a speed V drawn uniformly in ``speed`` (the pointwise maximum is at most sqrt(K) V).
 * :class:`UniformFamily`, uniform currents u = s e, e uniform on the sphere (``horizontal``: in the x-y
-  plane), s uniform in ``speed``; a share ``still_share`` of the draws is still water (s = 0 exactly).
+  plane; a share ``vertical_share`` of the draws along +z or -z instead), s uniform in ``speed``; a share
+  ``still_share`` of the draws is still water (s = 0 exactly).
 * :class:`TransformedFamily`, a base flow (one of ``bases`` per swimmer) under a random rotation alpha
   about the z axis through ``center``, a random strength s and time offset tau, plus a background current
   c (horizontal, random direction, magnitude uniform in ``background``):
@@ -216,19 +217,27 @@ class UniformFamily(FlowFamily):
         speed: Sequence[float] = (0.0, 1.2),
         still_share: float = 0.0,
         horizontal: bool = False,
+        vertical_share: float = 0.0,
         bounds: Box = WAKE_BOUNDS,
     ):
         super().__init__(bounds)
         self.speed = _check_range(speed, "speed")
-        if not 0 <= still_share <= 1:
-            raise ValueError(f"still_share is a fraction in [0, 1], got {still_share}")
-        self.still_share, self.horizontal = float(still_share), bool(horizontal)
+        for key, share in (("still_share", still_share), ("vertical_share", vertical_share)):
+            if not 0 <= share <= 1:
+                raise ValueError(f"{key} is a fraction in [0, 1], got {share}")
+        self.still_share, self.vertical_share = float(still_share), float(vertical_share)
+        self.horizontal = bool(horizontal)
         self.max_speed = self.speed[1]
 
     def draw(self, n, generator, device):
         e = _unit_vectors(n, generator, device)
         if self.horizontal:
             e = torch.nn.functional.normalize(e * e.new_tensor([1.0, 1.0, 0.0]), dim=-1)
+        if self.vertical_share:  # (no draw at 0: the other draws stay those of a family without the option)
+            # A swimmer's ego view knows the vertical: currents along it are a regime of their own, rare on the sphere.
+            vertical = torch.rand(n, generator=generator, device=device) < self.vertical_share
+            up_or_down = torch.sign(e[:, 2:]).where(e[:, 2:] != 0, 1.0) * e.new_tensor([0.0, 0.0, 1.0])
+            e = torch.where(vertical[:, None], up_or_down, e)
         s = _uniform(n, *self.speed, generator, device)
         still = torch.rand(n, generator=generator, device=device) < self.still_share
         return {"velocity": e * torch.where(still, 0.0, s)[:, None]}
