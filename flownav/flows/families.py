@@ -236,7 +236,7 @@ class UniformFamily(FlowFamily):
         if self.vertical_share:  # (no draw at 0: the other draws stay those of a family without the option)
             # A swimmer's ego view knows the vertical: currents along it are a regime of their own, rare on the sphere.
             vertical = torch.rand(n, generator=generator, device=device) < self.vertical_share
-            up_or_down = torch.sign(e[:, 2:]).where(e[:, 2:] != 0, 1.0) * e.new_tensor([0.0, 0.0, 1.0])
+            up_or_down = torch.where(e[:, 2:] < 0, -1.0, 1.0) * e.new_tensor([0.0, 0.0, 1.0])  # the side e points to
             e = torch.where(vertical[:, None], up_or_down, e)
         s = _uniform(n, *self.speed, generator, device)
         still = torch.rand(n, generator=generator, device=device) < self.still_share
