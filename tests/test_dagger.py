@@ -180,7 +180,7 @@ def test_a_reverse_expert_without_the_scene_expert_is_refused(teacher_ckpt, tmp_
     cfg = make_cfg(teacher_ckpt, "algo.iterations=1", f"algo.scene_reverse_expert={teacher_ckpt}")
     with pytest.raises(ConfigError, match=r"^algo.scene_reverse_expert needs algo.scene_expert"):
         train.run(cfg, tmp_path / "run")
-    cfg = make_cfg(teacher_ckpt, "algo.iterations=1", "algo.scene_currents=true")
+    cfg = make_cfg(teacher_ckpt, "algo.iterations=1", "algo.scene_currents=all")
     with pytest.raises(ConfigError, match=r"^algo.scene_currents needs algo.scene_expert"):
         train.run(cfg, tmp_path / "run")
 

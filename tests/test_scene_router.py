@@ -10,7 +10,7 @@ from flownav.agents.scene_router import SceneRoutedTeacher, scene_routed
 from flownav.builders import build_task
 from flownav.envs import NavigationEnv
 from flownav.envs.core import UPSTREAM_X
-from flownav.envs.observations import observation_size
+from flownav.envs.observations import GEO_PRIV_FLOW, observation_size
 from flownav.envs.tasks import REGION_1, REGION_2, FamilyTask, RegionTask
 from flownav.errors import CheckpointError
 from flownav.flows.base import WAKE_BOUNDS
@@ -171,9 +171,24 @@ def test_currents_go_to_the_flow_compensating_expert_when_asked():
     obs[:, -1] = torch.tensor([6.0, 0.0, 6.0, 5.0])
     plain = SceneRoutedTeacher(generalist, expert)(obs)
     assert torch.equal(plain, torch.tensor([[0.1, 0.2, 0.3]]).expand(4, 3))
-    routed = SceneRoutedTeacher(generalist, expert, currents=True)(obs)
+    routed = SceneRoutedTeacher(generalist, expert, currents="all")(obs)
     assert torch.equal(routed[[0, 2]], FlowCompensating()(obs[[0, 2], :-1]))
     assert torch.equal(routed[[1, 3]], plain[[1, 3]])
+
+
+def test_vertical_routing_sends_only_the_mostly_vertical_currents_to_the_flow_compensating_expert():
+    generalist, expert = Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9)
+    obs = torch.randn(6, 24)
+    obs[:, -1] = torch.tensor([6.0, 6.0, 6.0, 6.0, 5.0, 6.0])
+    obs[:, GEO_PRIV_FLOW] = torch.tensor(
+        [[0.0, 0.0, 0.8], [0.0, 0.0, -0.5], [0.6, 0.0, 0.5], [0.3, -0.4, 0.4], [0.0, 0.0, 0.8], [0.0, 0.0, 0.0]]
+    )  # up, down, tilted 40 deg from horizontal, 39 deg, a wake scene, still water
+    routed = SceneRoutedTeacher(generalist, expert, currents="vertical")(obs)
+    assert torch.equal(routed[:2], FlowCompensating()(obs[:2, :-1]))
+    assert torch.equal(routed[2:], torch.tensor([[0.1, 0.2, 0.3]]).expand(4, 3))
+    assert not torch.equal(routed[:2], routed[2:4])  # the two experts differ on these rows
+    with pytest.raises(ValueError, match=r"^currents is True; choose one of \(None, 'all', 'vertical'\)"):
+        SceneRoutedTeacher(generalist, expert, currents=True)
 
 
 def test_scene_routing_needs_the_generalist_view_and_one_action_box():

@@ -17,8 +17,9 @@ families (flag 5: turned, scaled, on a current, or as posed with another task) g
 ``algo.scene_wake_expert`` when one is given (a ``geo_priv`` checkpoint, e.g. a network that imitates the oracle
 over the wake family: +experiment=generalist_wake_expert), else to the generalist; only full-speed swimmers are
 flagged there (a weaker swimmer's wake episode keeps flag 0). Episodes in a uniform current or still water of the
-families (flag 6) go to the flow-compensating expert with ``algo.scene_currents`` (there it swims the straight,
-fastest track), else to the generalist.
+families (flag 6) go to the flow-compensating expert with ``algo.scene_currents=all`` (there it swims the straight,
+fastest track), only the mostly vertical ones (|u_z| > |u_xy|) with ``algo.scene_currents=vertical``, else to the
+generalist.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from torch import nn
 
 from flownav.agents.flow_compensating import FlowCompensating
 from flownav.envs.core import SCENE_AWAY, SCENE_CURRENT, SCENE_PAPER, SCENE_REVERSE, SCENE_UPSTREAM, SCENE_WAKE
-from flownav.envs.observations import observation_size
+from flownav.envs.observations import GEO_PRIV_FLOW, observation_size
 from flownav.errors import CheckpointError
 
 ROUTED_VIEW = "geo_priv_scene"
@@ -40,13 +41,15 @@ EXPERT_VIEWS = {
     "scene_away_expert": GENERALIST_VIEW,
     "scene_wake_expert": GENERALIST_VIEW,
 }
+CURRENT_ROUTES = (None, "all", "vertical")  # algo.scene_currents: which currents the flow-compensating expert labels
 
 
 class SceneRoutedTeacher(nn.Module):
     """The expert of each row's paper-scene code (the view's last entry, flownav.envs.core.paper_scene):
     ``expert`` for SCENE_PAPER, the flow-compensating expert for SCENE_UPSTREAM, ``reverse`` (if given) for
     SCENE_REVERSE, ``away`` (if given; else ``expert``) for SCENE_AWAY, ``wake`` (if given) for SCENE_WAKE, the
-    flow-compensating expert for SCENE_CURRENT if ``currents``, ``generalist`` elsewhere. ``expert`` and
+    flow-compensating expert for SCENE_CURRENT if ``currents`` is ``"all"`` (only where the current is mostly
+    vertical if ``"vertical"``), ``generalist`` elsewhere. ``expert`` and
     ``reverse`` read the first 9 numbers of the view (``geo_priv`` begins with ``geo_sincos``), the others all but
     the code."""
 
@@ -58,17 +61,23 @@ class SceneRoutedTeacher(nn.Module):
         reverse: nn.Module | None = None,
         away: nn.Module | None = None,
         wake: nn.Module | None = None,
-        currents: bool = False,
+        currents: str | None = None,
     ):
         super().__init__()
         self.generalist, self.expert, self.reverse, self.away, self.wake = generalist, expert, reverse, away, wake
+        if currents not in CURRENT_ROUTES:
+            raise ValueError(f"currents is {currents!r}; choose one of {CURRENT_ROUTES}")
         self.currents = currents
         self.upstream = FlowCompensating(u_max)
         self.expert_size = observation_size(EXPERT_VIEW)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         code, view, geo = obs[:, -1:].round(), obs[:, :-1], obs[:, : self.expert_size]
-        compensating = (code == SCENE_UPSTREAM) | ((code == SCENE_CURRENT) & self.currents)
+        current = code == SCENE_CURRENT
+        if self.currents == "vertical":  # still water (u = 0) stays with the generalist
+            u = view[:, GEO_PRIV_FLOW]
+            current = current & (u[:, 2:].abs() > u[:, :2].norm(dim=-1, keepdim=True))
+        compensating = (code == SCENE_UPSTREAM) | (current & (self.currents is not None))
         out = torch.where(compensating, self.upstream(view), self.generalist(view))
         if self.reverse is not None:
             out = torch.where(code == SCENE_REVERSE, self.reverse(geo), out)
@@ -80,7 +89,7 @@ class SceneRoutedTeacher(nn.Module):
 
 
 def scene_routed(
-    generalist: nn.Module, generalist_view: str, experts: dict, currents: bool = False
+    generalist: nn.Module, generalist_view: str, experts: dict, currents: str | None = None
 ) -> SceneRoutedTeacher:
     """The routed teacher of a ``geo_priv`` generalist and its experts: ``experts`` maps the config key
     (``algo.scene_expert``, optionally ``algo.scene_reverse_expert``, ``algo.scene_away_expert`` and

@@ -166,7 +166,7 @@ def train(cfg, run_dir) -> dict:
         experts = {
             k: (str(a[k]), load_policy(resolve(str(a[k])), expect_obs=EXPERT_VIEWS[k], device=device)[0]) for k in keys
         }
-        teacher = scene_routed(teacher, teacher_view, experts, currents=bool(a.get("scene_currents")))
+        teacher = scene_routed(teacher, teacher_view, experts, currents=a.get("scene_currents"))
         teacher_view = ROUTED_VIEW
         for k in keys:
             teacher_meta |= {k: str(a[k]), f"{k}_sha256": sha256(resolve(str(a[k])))}
