@@ -97,6 +97,7 @@ def unweighted(cfg) -> dict:
         "posed_wake_any_start_box",  # a box inside the family's domain: it weights where those starts lie
         "posed_wake_reverse_share",
         "full_speed_share",
+        "vertical_share",  # exactly vertical currents: directions inside the family's sphere, drawn more often
     )
     if not isinstance(cfg, Mapping):
         return cfg
