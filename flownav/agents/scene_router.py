@@ -73,11 +73,13 @@ class SceneRoutedTeacher(nn.Module):
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         code, view, geo = obs[:, -1:].round(), obs[:, :-1], obs[:, : self.expert_size]
-        current = code == SCENE_CURRENT
-        if self.currents == "vertical":  # still water (u = 0) stays with the generalist
-            u = view[:, GEO_PRIV_FLOW]
-            current = current & (u[:, 2:].abs() > u[:, :2].norm(dim=-1, keepdim=True))
-        compensating = (code == SCENE_UPSTREAM) | (current & (self.currents is not None))
+        compensating = code == SCENE_UPSTREAM
+        if self.currents is not None:
+            current = code == SCENE_CURRENT
+            if self.currents == "vertical":  # still water (u = 0) stays with the generalist
+                u = view[:, GEO_PRIV_FLOW]
+                current = current & (u[:, 2:].abs() > u[:, :2].norm(dim=-1, keepdim=True))
+            compensating = compensating | current
         out = torch.where(compensating, self.upstream(view), self.generalist(view))
         if self.reverse is not None:
             out = torch.where(code == SCENE_REVERSE, self.reverse(geo), out)
