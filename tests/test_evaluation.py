@@ -435,6 +435,19 @@ def test_report_puts_the_paper_next_to_ours(tmp_path):
     assert json.loads((tmp_path / "paper.json").read_text())["experiments"]["training"]["provenance"]["commit"]
 
 
+def test_the_performance_goal_counts_only_the_papers_experiments(tmp_path):
+    """The <= 60-minute goal is for `+experiment=paper`: the zoo and the well-posed ABC are timed apart."""
+    from flownav.evaluation.report import paper_suite_keys, write_report
+
+    assert {"training", "extended", "abc", "loss_curves"} <= paper_suite_keys()
+    assert not {"generalization", "abc_periodic"} & paper_suite_keys()
+    exps = {k: {"title": k, "seconds": s} for k, s in [("training", 600), ("extended", 1200), ("generalization", 3000)]}
+    text = write_report({"experiments": exps}, tmp_path / "REPORT.md", "python evaluate.py", seconds=90).read_text()
+    assert "- This run of `evaluate.py`: 1.5 minutes." in text
+    assert "The experiments of `+experiment=paper` below, as last run, took 30.0 minutes together (goal: <= 60" in text
+    assert "- The other experiments below (`generalization`), as last run: 50.0 minutes." in text
+
+
 def test_the_loss_curve_section_takes_the_papers_numbers_from_the_config_only(tmp_path):
     """Fig. 2c's paper curve is stated once in its REPORT.md section: the config's paper_ref, not the kind's code."""
     from omegaconf import OmegaConf
