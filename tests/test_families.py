@@ -272,6 +272,29 @@ def test_privileged_views_on_a_linear_flow():
     assert torch.allclose(critic[:, 24:], td["target"] @ M.T + c, atol=1e-5)
 
 
+def test_privileged_look_up_in_a_family_after_steps_and_a_partial_reset():
+    """The flow, its gradient (forward differences of GRADIENT_STEP) and the flow at the target that the privileged
+    views read come from one look-up of 5 points per swimmer: the same numbers as separate look-ups of each slot's
+    own flow, for slots that stepped and for slots just reset."""
+    from flownav.envs.core import GRADIENT_STEP
+
+    env = NavigationEnv(FourierFamily(), num_envs=6, views=("geo_priv_critic",), time_limit=10.0, seed=0)
+    td = env.reset()
+    for _ in range(3):
+        td["action"] = env.action_spec.rand()
+        td = env.step(td)["next"]
+    env.reset(td.clone().set("_reset", torch.tensor([0, 1, 0, 0, 1, 0], dtype=torch.bool)[:, None]))
+    s, slots = env.state, torch.arange(6)
+    t = s.t0 + s.time
+    u = env.flow.velocity(s.pos, t, slots)
+    shifted = [env.flow.velocity(s.pos + GRADIENT_STEP * e, t, slots) for e in torch.eye(3)]
+    grad = torch.stack([(v - u) / GRADIENT_STEP for v in shifted], -1)  # [slot, i, j]: du_i/dx_j
+    assert s.time[1] == 0 and s.time[0] > 0
+    assert torch.allclose(s.flow_vel, u, atol=1e-6)
+    assert torch.allclose(s.flow_grad, grad, atol=1e-4)
+    assert torch.allclose(s.target_flow, env.flow.velocity(s.target, t, slots), atol=1e-6)
+
+
 def test_family_configs_build_and_bad_members_fail_with_the_key():
     for name in ("family_fourier", "family_current", "family_vortex_street"):
         flow = build_flow(OmegaConf.load(f"conf/flow/{name}.yaml"))

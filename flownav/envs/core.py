@@ -261,7 +261,7 @@ def reset(state: Swimmers, idx: Tensor, flow: FlowField, settings: Settings, rng
         strength = put(strength, ep.strength)
     if hasattr(settings.task, "swim_speed"):  # drawn last: tasks without it keep their random streams
         swim_scale = put(swim_scale, settings.swim_speed_scale * settings.task.swim_speed(idx.numel(), rng, rng.device))
-    flow_vel = flow_at(flow, settings, strength, ep.start, ep.t0, idx)
+    flow_vel, privileged = sense_flow(flow, settings, strength, ep.start, ep.t0, ep.target, idx)
     require_finite(flow_vel, "the flow velocity at the start", FLOW_FIX, ep.start)
     d = flow.displacement(ep.start, ep.target).norm(dim=-1)
     zero, zero_int = torch.zeros_like(d), torch.zeros_like(idx)
@@ -285,8 +285,9 @@ def reset(state: Swimmers, idx: Tensor, flow: FlowField, settings: Settings, rng
         dist=put(state.dist, d),
         strength=strength,
         swim_scale=swim_scale,
+        **{key: getattr(state, key).index_put((idx,), value) for key, value in privileged.items()},
     )
-    return sense_privileged(state, flow, settings, idx)
+    return state
 
 
 def step(state: Swimmers, action: Tensor, flow: FlowField, settings: Settings) -> tuple[Swimmers, Tensor]:
@@ -303,7 +304,7 @@ def step(state: Swimmers, action: Tensor, flow: FlowField, settings: Settings) -
     pos = flow.wrap(moved)  # periodic axes: back into the box
     steps = state.steps + 1
     time = steps * settings.dt
-    flow_vel = flow_at(flow, settings, state.strength, pos, state.t0 + time)
+    flow_vel, privileged = sense_flow(flow, settings, state.strength, pos, state.t0 + time, state.target)
     require_finite(flow_vel, "the flow velocity", FLOW_FIX, pos)
     ring_ptr = state.ring_ptr
     if state.flow_ring.shape[1]:
@@ -336,30 +337,29 @@ def step(state: Swimmers, action: Tensor, flow: FlowField, settings: Settings) -
         ring_ptr=ring_ptr,
         dist=dist,
         status=status,
+        **privileged,
     )
-    return sense_privileged(state, flow, settings), reward
+    return state, reward
 
 
-def sense_privileged(state: Swimmers, flow: FlowField, settings: Settings, idx=None) -> Swimmers:
-    """What only the simulator knows, for the privileged views, per slot (all or ``idx``): the flow's gradient
-    by forward differences from the flow the swimmer feels, and the flow at the target, in one look-up of 3
-    (or 4) points per swimmer. The state as it is when no view asks for them."""
+def sense_flow(
+    flow: FlowField, settings: Settings, strength: Tensor, pos: Tensor, t: Tensor, target: Tensor, idx=None
+) -> tuple[Tensor, dict[str, Tensor]]:
+    """The flow velocity the swimmers feel at ``pos`` (all slots, or the slots ``idx``) and, for the privileged
+    views, what only the simulator knows: the flow's gradient by forward differences from it (``flow_grad``) and
+    the flow at ``target`` (``target_flow``); ``{}`` when no view asks. One look-up of 1, 4 or 5 points per
+    swimmer: a family's per-call cost is paid once."""
     if not needs_gradient(settings.views):
-        return state
+        return flow_at(flow, settings, strength, pos, t, idx), {}
     target_flow = needs_target_flow(settings.views)
-    slots = torch.arange(state.pos.shape[0], device=state.pos.device) if idx is None else idx
-    pos, t, n = state.pos[slots], (state.t0 + state.time)[slots], slots.numel()
-    points = pos[None] + torch.eye(3, device=pos.device)[:, None] * GRADIENT_STEP  # [3 (j), n, 3]: + h e_j
-    if target_flow:
-        points = torch.cat((points, state.target[slots][None]))
+    n = pos.shape[0]
+    slots = torch.arange(n, device=pos.device) if idx is None else idx
+    shifted = pos[None] + torch.eye(3, device=pos.device)[:, None] * GRADIENT_STEP  # [3 (j), n, 3]: + h e_j
+    points = torch.cat((pos[None], shifted, target[None]) if target_flow else (pos[None], shifted))
     rows = points.shape[0]
-    u = flow_at(flow, settings, state.strength, points.reshape(-1, 3), t.repeat(rows), slots.repeat(rows))
-    u = u.view(rows, n, 3)
-    grad = ((u[:3] - state.flow_vel[slots]) / GRADIENT_STEP).permute(1, 2, 0)  # [n, i (component), j (d/dx_j)]
-    state = replace(state, flow_grad=state.flow_grad.index_put((slots,), grad))
-    if target_flow:
-        state = replace(state, target_flow=state.target_flow.index_put((slots,), u[3]))
-    return state
+    u = flow_at(flow, settings, strength, points.reshape(-1, 3), t.repeat(rows), slots.repeat(rows)).view(rows, n, 3)
+    grad = ((u[1:4] - u[0]) / GRADIENT_STEP).permute(1, 2, 0)  # [n, i (component), j (d/dx_j)]
+    return u[0], {"flow_grad": grad} | ({"target_flow": u[4]} if target_flow else {})
 
 
 def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, Tensor]:

@@ -25,8 +25,8 @@
   swimmer does not: a critic that sees the phase of the periodic wake can tell a vortex arriving from
   one leaving, and gives the actor less noisy advantages. The actor keeps its own view.
 * ``geo_priv`` (23, the generalist teacher's actor): ``geo_sincos`` plus the local flow velocity u (3),
-  its gradient du_i/dx_j (9, row-major, central differences of step ``GRADIENT_STEP`` in the env: 6
-  more look-ups), the swim speed U (the action's full speed times the swimmer's speed factor) and
+  its gradient du_i/dx_j (9, row-major, forward differences of step ``GRADIENT_STEP`` in the env: 3
+  more points in the same look-up), the swim speed U (the action's full speed times the swimmer's speed factor) and
   log(U / (|u| + 0.05)), the swim-speed ratio against the local flow. A teacher that knows how the
   flow varies around it and how strong it is against the flow can plan; an ego student imitates it.
 * ``geo_priv_scene`` (24, a scene-routed teacher's view): ``geo_priv`` plus 1 where the swimmer is in the
