@@ -224,6 +224,33 @@ def posed_and_turned_wakes() -> MixtureFamily:
     return MixtureFamily([posed, turned], [1.0, 1.0], WAKE_BOUNDS)
 
 
+def test_the_scene_is_set_at_each_reset_and_rebuilt_when_a_saved_state_is_loaded():
+    """The code is an episode's (computed at its reset, the same as paper_scene of the state), is not saved
+    with the env's state, and an env that loads that state sees the same codes and steps on identically."""
+    from flownav.envs.core import paper_scene
+
+    task = FamilyTask(WAKE_BOUNDS, regions_share=0.0, posed_wake_regions_share=1.0, posed_wake_reverse_share=0.5)
+    make = lambda seed: NavigationEnv(posed_and_turned_wakes(), task, num_envs=64, views=("geo_priv_scene",), seed=seed)  # noqa: E731
+    env = make(5)
+    td = env.reset()
+    for _ in range(40):
+        td["action"] = env.action_spec.rand()
+        td = env.step_and_maybe_reset(td)[1]
+    assert (env.state.steps < 40).any()  # some episodes ended and restarted in place
+    assert torch.equal(env.state.scene, paper_scene(env.state, env.flow, env.settings))
+    assert {0, 1, 3, 5} >= set(env.state.scene.tolist()) and len(set(env.state.scene.tolist())) >= 3
+    saved = env.state_dict()
+    assert "scene" not in saved
+    other = make(9)
+    other.reset()
+    other.load_state_dict(saved)
+    assert torch.equal(other.state.scene, env.state.scene)
+    action = env.action_spec.rand()
+    a = env.step(td.clone().set("action", action))["next"]
+    b = other.step(td.clone().set("action", action))["next"]
+    assert torch.equal(a["geo_priv_scene"], b["geo_priv_scene"])
+
+
 def test_the_family_task_poses_the_papers_task_in_the_posed_wake():
     flow = posed_and_turned_wakes()
     task = FamilyTask(WAKE_BOUNDS, regions_share=0.0, posed_wake_regions_share=1.0)

@@ -117,9 +117,12 @@ class Swimmers:
     swim_scale: Tensor  # [B] the factor on the action's speed (settings.swim_speed_scale times the task's draw)
     flow_grad: Tensor  # [B, 3, 3] du_i / dx_j (privileged views)
     target_flow: Tensor  # [B, 3] the flow at the target (privileged critic)
+    scene: Tensor  # [B] int64 the episode's paper-scene code (:func:`paper_scene`; the scene view), set at reset
 
 
 STATE_FIELDS = tuple(f.name for f in fields(Swimmers))
+# What an exact resume saves: all but the scene, which follows from the episode and its flow (keep_scene).
+SAVED_FIELDS = tuple(name for name in STATE_FIELDS if name != "scene")
 
 
 class Episodes(NamedTuple):
@@ -170,6 +173,7 @@ def initial_state(num_envs: int, settings: Settings, device) -> Swimmers:
         swim_scale=torch.full((num_envs,), settings.swim_speed_scale, device=device),
         flow_grad=z(3, 3),
         target_flow=z(3),
+        scene=torch.zeros(num_envs, dtype=torch.int64, device=device),
     )
 
 
@@ -287,7 +291,15 @@ def reset(state: Swimmers, idx: Tensor, flow: FlowField, settings: Settings, rng
         swim_scale=swim_scale,
         **{key: getattr(state, key).index_put((idx,), value) for key, value in privileged.items()},
     )
-    return state
+    return keep_scene(state, flow, settings, idx)
+
+
+def keep_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tensor) -> Swimmers:
+    """The state with the paper-scene code of the episodes in the slots ``idx`` (when a view reads it): it depends
+    only on what a reset draws, so it is computed once per episode, not at every step."""
+    if not needs_scene(settings.views):
+        return state
+    return replace(state, scene=state.scene.index_put((idx,), paper_scene(state, flow, settings, idx)))
 
 
 def step(state: Swimmers, action: Tensor, flow: FlowField, settings: Settings) -> tuple[Swimmers, Tensor]:
@@ -373,7 +385,7 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
             "time_left": 1 - state.steps / settings.max_steps,
         }
     if needs_scene(views):
-        privileged["paper_scene"] = paper_scene(state, flow, settings).to(state.pos.dtype)
+        privileged["paper_scene"] = state.scene.to(state.pos.dtype)
     seen = State(
         to_target=flow.displacement(state.pos, state.target),
         velocity=state.vel,
@@ -396,9 +408,10 @@ UPSTREAM_X = 4.0
 SCENE_NONE, SCENE_PAPER, SCENE_UPSTREAM, SCENE_REVERSE, SCENE_AWAY, SCENE_WAKE, SCENE_CURRENT = 0, 1, 2, 3, 4, 5, 6
 
 
-def paper_scene(state: Swimmers, flow: FlowField, settings: Settings) -> Tensor:
-    """``[B]`` code of the paper's scene: the CFD wake as posed (unturned: no misalignment, a family slot drawn
-    without rotation, scaling or background; at strength 1) with the swimmer at its full speed, and
+def paper_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tensor | None = None) -> Tensor:
+    """Code of the paper's scene, for every slot (``[B]``) or the slots ``idx``: the CFD wake as posed (unturned:
+    no misalignment, a family slot drawn without rotation, scaling or background; at strength 1) with the swimmer
+    at its full speed, and
     SCENE_PAPER: the target in Region 2 from a start in Region 1 (the paper's training task); SCENE_UPSTREAM: that
     target for an episode that started upstream of ``UPSTREAM_X``; SCENE_AWAY: that target from any other start (the
     rest of the extended domain); SCENE_REVERSE: from Region 2 to a target in Region 1 (the crossing the other way,
@@ -406,20 +419,21 @@ def paper_scene(state: Swimmers, flow: FlowField, settings: Settings) -> Tensor:
     (turned, scaled, on a current, or as posed with another task); SCENE_CURRENT: an episode in a family slot
     whose flow is a uniform current or still water; else SCENE_NONE. What the simulator knows and a scene-routed
     teacher reads."""
-    slots = torch.arange(state.pos.shape[0], device=state.pos.device)
+    slots = torch.arange(state.pos.shape[0], device=state.pos.device) if idx is None else idx
+    start, target = state.start[slots], state.target[slots]
     if isinstance(flow, FlowFamily):
         posed, wake, current = flow.wake_as_posed(slots), flow.holds_obstacle(slots), flow.holds_uniform(slots)
     else:  # a misaligned scene is a RotatedFlow, not the dataset's GridFlow
         posed = torch.full_like(slots, isinstance(flow, GridFlow) and bool(flow.obstacles), dtype=torch.bool)
         wake = current = torch.zeros_like(posed)
     if settings.flow_strength is not None:
-        posed = posed & (state.strength == 1)
-    full = state.swim_scale == 1
+        posed = posed & (state.strength[slots] == 1)
+    full = state.swim_scale[slots] == 1
     posed, wake = posed & full, wake & full
-    forward = posed & REGION_2.contains(state.target)
-    reverse = posed & REGION_1.contains(state.target) & REGION_2.contains(state.start)
-    code = torch.where(REGION_1.contains(state.start), SCENE_PAPER, SCENE_AWAY)
-    code = torch.where(state.start[:, 0] < UPSTREAM_X, SCENE_UPSTREAM, code)
+    forward = posed & REGION_2.contains(target)
+    reverse = posed & REGION_1.contains(target) & REGION_2.contains(start)
+    code = torch.where(REGION_1.contains(start), SCENE_PAPER, SCENE_AWAY)
+    code = torch.where(start[:, 0] < UPSTREAM_X, SCENE_UPSTREAM, code)
     other = torch.where(wake, SCENE_WAKE, torch.where(current, SCENE_CURRENT, SCENE_NONE))
     code = torch.where(forward, code, other)
     return torch.where(reverse, SCENE_REVERSE, code)

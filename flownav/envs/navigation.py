@@ -17,7 +17,7 @@ from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from flownav.envs import core
-from flownav.envs.core import DPSI_MAX, DTHETA_MAX, STATE_FIELDS, Settings, Status
+from flownav.envs.core import DPSI_MAX, DTHETA_MAX, SAVED_FIELDS, STATE_FIELDS, Settings, Status
 from flownav.envs.observations import check_views, observation_size
 from flownav.envs.reward import RewardConfig
 from flownav.envs.tasks import RegionTask
@@ -145,7 +145,7 @@ class NavigationEnv(EnvBase):
     # ----------------------------------------------------------------- exact resume
     def state_dict(self) -> dict:
         """Everything a step depends on: the swimmers' state, the memory ring and its pointer, the RNG."""
-        state = {k: getattr(self.state, k) for k in STATE_FIELDS}
+        state = {k: getattr(self.state, k) for k in SAVED_FIELDS}
         if isinstance(self.flow, FlowFamily):  # each slot's flow
             state["flow_family"] = self.flow.state_dict()
         return state | {"num_envs": self.num_envs, "rng": self.rng.get_state()}
@@ -158,10 +158,12 @@ class NavigationEnv(EnvBase):
                 f"the saved env state has {state['num_envs']} swimmers and a memory ring of "
                 f"{tuple(state['flow_ring'].shape)}; this env has {self.num_envs} and {tuple(ring.shape)}"
             )
-        saved = {k: state[k].to(self.device).clone() if torch.is_tensor(state[k]) else state[k] for k in STATE_FIELDS}
-        self.state = core.Swimmers(**saved)
+        saved = {k: state[k].to(self.device).clone() if torch.is_tensor(state[k]) else state[k] for k in SAVED_FIELDS}
+        self.state = core.Swimmers(**saved, scene=self.state.scene)
         if isinstance(self.flow, FlowFamily):
             self.flow.load_state_dict(state["flow_family"])
+        every = torch.arange(self.num_envs, device=self.device)
+        self.state = core.keep_scene(self.state, self.flow, self.settings, every)
         self.rng.set_state(state["rng"])
 
     def _flow_at(self, pos: Tensor, t: Tensor, idx: Tensor | None = None) -> Tensor:
