@@ -411,14 +411,13 @@ SCENE_NONE, SCENE_PAPER, SCENE_UPSTREAM, SCENE_REVERSE, SCENE_AWAY, SCENE_WAKE, 
 def paper_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tensor | None = None) -> Tensor:
     """Code of the paper's scene, for every slot (``[B]``) or the slots ``idx``: the CFD wake as posed (unturned:
     no misalignment, a family slot drawn without rotation, scaling or background; at strength 1) with the swimmer
-    at its full speed, and
-    SCENE_PAPER: the target in Region 2 from a start in Region 1 (the paper's training task); SCENE_UPSTREAM: that
-    target for an episode that started upstream of ``UPSTREAM_X``; SCENE_AWAY: that target from any other start (the
-    rest of the extended domain); SCENE_REVERSE: from Region 2 to a target in Region 1 (the crossing the other way,
-    paper SI 2); SCENE_WAKE: any other episode of a full-speed swimmer in a family slot whose flow is a CFD wake
-    (turned, scaled, on a current, or as posed with another task); SCENE_CURRENT: an episode in a family slot
-    whose flow is a uniform current or still water; else SCENE_NONE. What the simulator knows and a scene-routed
-    teacher reads."""
+    at its full speed, and SCENE_PAPER: the target in Region 2 from a start in Region 1 (the paper's training
+    task); SCENE_UPSTREAM: that target for an episode that started upstream of ``UPSTREAM_X``; SCENE_AWAY: that
+    target from any other start (the rest of the extended domain); SCENE_REVERSE: from Region 2 to a target in
+    Region 1 (the crossing the other way, paper SI 2); SCENE_WAKE: any other episode of a full-speed swimmer in a
+    family slot whose flow is a CFD wake (turned, scaled, on a current, or as posed with another task);
+    SCENE_CURRENT: an episode in a family slot whose flow is a uniform current or still water; else SCENE_NONE.
+    What the simulator knows and a scene-routed teacher reads."""
     slots = torch.arange(state.pos.shape[0], device=state.pos.device) if idx is None else idx
     start, target = state.start[slots], state.target[slots]
     if isinstance(flow, FlowFamily):

@@ -144,7 +144,8 @@ class NavigationEnv(EnvBase):
 
     # ----------------------------------------------------------------- exact resume
     def state_dict(self) -> dict:
-        """Everything a step depends on: the swimmers' state, the memory ring and its pointer, the RNG."""
+        """Everything a step depends on: the swimmers' state, the memory ring and its pointer, the RNG (the scene
+        code follows from them: :meth:`load_state_dict` rebuilds it)."""
         state = {k: getattr(self.state, k) for k in SAVED_FIELDS}
         if isinstance(self.flow, FlowFamily):  # each slot's flow
             state["flow_family"] = self.flow.state_dict()
