@@ -196,6 +196,7 @@ def build_env(
     schema.check_env(env_cfg)
     reward = env_cfg.get("reward", {}) or {}
     strength = env_cfg.get("flow_strength")
+    noise = env_cfg.get("sensor_noise") or {}
     try:
         return NavigationEnv(
             flow,
@@ -211,6 +212,7 @@ def build_env(
             random_flow_phase=bool(env_cfg.get("random_flow_phase", True)),
             flow_strength=None if strength is None else tuple(float(v) for v in strength),
             flow_strength_full=float(env_cfg.get("flow_strength_full") or 0.0),
+            sensor_noise=(float(noise.get("flow") or 0.0), float(noise.get("target") or 0.0)),
             seed=seed,
             device=device,
         )

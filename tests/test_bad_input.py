@@ -136,6 +136,11 @@ CASES = [
         "env.random_flow_phase must be true or false; got 'maybe'",
     ),
     (
+        "sensor_noise_negative",
+        train_case("env.sensor_noise.flow=-0.1"),
+        "env.sensor_noise.flow must be >= 0, a finite number; got -0.1",
+    ),
+    (
         "hidden_zero",
         train_case("algo.actor.hidden=[0]"),
         "algo.actor.hidden must be a non-empty list of integers, each >= 1; got [0]",

@@ -70,8 +70,9 @@ def test_oracle_settings_are_checked():
         OracleSettings(horizon=4, replan_every=5, blocks=2)
 
 
-def test_the_settings_script_runs_the_suites_abc_tests():
-    """scripts/oracle_settings.py measures on the suite's ABC tests: the same flow, task and env configs."""
+def test_the_settings_script_runs_the_suites_tests():
+    """scripts/oracle_settings.py measures on the suite's ABC and extended-domain tests: the same flow, task and env
+    configs."""
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
@@ -79,11 +80,11 @@ def test_the_settings_script_runs_the_suites_abc_tests():
     from flownav.paths import REPO_ROOT
 
     script = load_module("scripts/oracle_settings.py")
-    for test, experiment in (("as_posed", "paper_abc"), ("periodic", "abc_periodic")):
+    for test, experiment in (("as_posed", "paper_abc"), ("periodic", "abc_periodic"), ("extended", "paper_extended")):
         with initialize_config_dir(config_dir=str(REPO_ROOT / "conf" / "evaluate"), version_base="1.3"):
             cfg = compose("config", overrides=[f"+experiment={experiment}"])
         (entry,) = cfg.suite.values()
-        mine = script.abc_config(test)
+        mine = script.test_config(test)
         for key in ("flow", "task"):
             assert OmegaConf.to_container(mine[key]) == OmegaConf.to_container(entry[key]), (test, key)
         suite_env = Suite(cfg, log=lambda *_: None).env_cfg(entry)

@@ -30,6 +30,7 @@ from flownav.envs.kinematics import body_frame, heading_vector, move, step_reach
 from flownav.envs.observations import (
     HISTORY_LEN,
     HISTORY_STRIDE,
+    SENSED_VIEWS,
     State,
     compute_views,
     needs_body_frame,
@@ -72,7 +73,8 @@ class Settings:
     (each episode's factor on ``swim_speed_scale``). views: the observation views (they decide what is sensed).
     max_steps: the time limit in steps. misalignment_deg: the scene turned about z through ``rotation_center``.
     flow_strength: ``(low, high)`` of each episode's factor on the flow, or None; flow_strength_full: the share
-    of episodes at 1.
+    of episodes at 1. sensor_noise: ``(flow, target)`` standard deviations of the ego views' sensors
+    (:func:`draw_sensor_error`).
     """
 
     task: object
@@ -87,6 +89,12 @@ class Settings:
     random_flow_phase: bool = True
     flow_strength: tuple[float, float] | None = None
     flow_strength_full: float = 0.0
+    sensor_noise: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def noisy(self) -> bool:
+        """Whether the ego views read noisy sensors (any view does and a standard deviation is set)."""
+        return any(self.sensor_noise) and any(v in SENSED_VIEWS for v in self.views)
 
 
 @dataclass
@@ -118,6 +126,7 @@ class Swimmers:
     flow_grad: Tensor  # [B, 3, 3] du_i / dx_j (privileged views)
     target_flow: Tensor  # [B, 3] the flow at the target (privileged critic)
     scene: Tensor  # [B] int64 the episode's paper-scene code (:func:`paper_scene`; the scene view), set at reset
+    sensor_error: Tensor  # [B, 6] standard-normal errors of the last reading: flow (3), to-target (3); zeros if exact
 
 
 STATE_FIELDS = tuple(f.name for f in fields(Swimmers))
@@ -174,6 +183,7 @@ def initial_state(num_envs: int, settings: Settings, device) -> Swimmers:
         flow_grad=z(3, 3),
         target_flow=z(3),
         scene=torch.zeros(num_envs, dtype=torch.int64, device=device),
+        sensor_error=z(6),
     )
 
 
@@ -269,8 +279,11 @@ def reset(state: Swimmers, idx: Tensor, flow: FlowField, settings: Settings, rng
     require_finite(flow_vel, "the flow velocity at the start", FLOW_FIX, ep.start)
     d = flow.displacement(ep.start, ep.target).norm(dim=-1)
     zero, zero_int = torch.zeros_like(d), torch.zeros_like(idx)
+    error = state.sensor_error
+    if settings.noisy:  # drawn last: exact sensors keep the random streams of the other draws
+        error = put(error, draw_sensor_error(idx.numel(), rng))
     if state.flow_ring.shape[1]:  # no past yet: the swimmer has been sensing its start flow
-        state.flow_ring[idx] = flow_vel[:, None, :]
+        state.flow_ring[idx] = sensed_flow(flow_vel, error[idx], settings)[:, None, :]
     state = replace(
         state,
         pos=put(state.pos, ep.start),
@@ -289,9 +302,23 @@ def reset(state: Swimmers, idx: Tensor, flow: FlowField, settings: Settings, rng
         dist=put(state.dist, d),
         strength=strength,
         swim_scale=swim_scale,
+        sensor_error=error,
         **{key: getattr(state, key).index_put((idx,), value) for key, value in privileged.items()},
     )
     return keep_scene(state, flow, settings, idx)
+
+
+def draw_sensor_error(n: int, rng: torch.Generator) -> Tensor:
+    """Standard-normal errors of n readings, ``[n, 6]``: the flow sensor's (3) and the to-target sensor's (3).
+    The ego views read the flow as u + sigma_flow e (the total velocity as the exactly known swim velocity plus
+    that reading; the memory keeps the readings as sensed) and the to-target vector d as d + sigma_target |d| e
+    (a relative range and bearing error); one fresh draw per step (:func:`sensed_state`)."""
+    return torch.randn(n, 6, generator=rng, device=rng.device)
+
+
+def sensed_flow(flow_vel: Tensor, error: Tensor, settings: Settings) -> Tensor:
+    """The flow as the ego views' sensor reads it (exact without sensor noise)."""
+    return flow_vel + settings.sensor_noise[0] * error[:, :3] if settings.noisy else flow_vel
 
 
 def keep_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tensor) -> Swimmers:
@@ -302,10 +329,12 @@ def keep_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tensor
     return replace(state, scene=state.scene.index_put((idx,), paper_scene(state, flow, settings, idx)))
 
 
-def step(state: Swimmers, action: Tensor, flow: FlowField, settings: Settings) -> tuple[Swimmers, Tensor]:
+def step(
+    state: Swimmers, action: Tensor, flow: FlowField, settings: Settings, rng: torch.Generator | None = None
+) -> tuple[Swimmers, Tensor]:
     """One step of every slot with ``action`` ``[B, 3]`` (clipped to :func:`action_bounds`): the new state
     (its ``status`` says which episodes ended and why) and the reward ``[B]`` of eq. 6. Ended episodes stay
-    as they ended until :func:`reset`."""
+    as they ended until :func:`reset`. ``rng``: the env's generator, which noisy sensors draw from."""
     require_finite(action, "the action", "the policy produced it: check its weights and observations")
     low, high = action_bounds(settings, action.device)
     speed, dtheta, dpsi = torch.max(torch.min(action, high), low).unbind(-1)
@@ -318,10 +347,15 @@ def step(state: Swimmers, action: Tensor, flow: FlowField, settings: Settings) -
     time = steps * settings.dt
     flow_vel, privileged = sense_flow(flow, settings, state.strength, pos, state.t0 + time, state.target)
     require_finite(flow_vel, "the flow velocity", FLOW_FIX, pos)
+    error = state.sensor_error
+    if settings.noisy:
+        if rng is None:
+            raise ValueError("sensor noise draws from the env's generator: pass rng to step")
+        error = draw_sensor_error(pos.shape[0], rng)
     ring_ptr = state.ring_ptr
     if state.flow_ring.shape[1]:
         ring_ptr = (ring_ptr + 1) % state.flow_ring.shape[1]
-        state.flow_ring[:, ring_ptr] = flow_vel
+        state.flow_ring[:, ring_ptr] = sensed_flow(flow_vel, error, settings)
 
     radius = settings.reward.success_radius
     dist = flow.displacement(pos, state.target).norm(dim=-1)
@@ -349,6 +383,7 @@ def step(state: Swimmers, action: Tensor, flow: FlowField, settings: Settings) -
         ring_ptr=ring_ptr,
         dist=dist,
         status=status,
+        sensor_error=error,
         **privileged,
     )
     return state, reward
@@ -398,7 +433,21 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
         swim_speed=settings.u_max * state.swim_scale if needs_swim_speed(views) else None,
         **privileged,
     )
-    return compute_views(seen, views)
+    if not settings.noisy:
+        return compute_views(seen, views)
+    sensed = [v for v in views if v in SENSED_VIEWS]
+    exact = compute_views(seen, [v for v in views if v not in SENSED_VIEWS])
+    return exact | compute_views(sensed_state(seen, state, settings), sensed)
+
+
+def sensed_state(seen: State, state: Swimmers, settings: Settings) -> State:
+    """What the ego views read with noisy sensors (:func:`draw_sensor_error`): the flow reading with its error,
+    the total velocity as the swim velocity plus that reading, the to-target vector with its relative error (the
+    memory already holds the readings as sensed)."""
+    flow_error = settings.sensor_noise[0] * state.sensor_error[:, :3]
+    d = seen.to_target
+    d_error = settings.sensor_noise[1] * d.norm(dim=-1, keepdim=True) * state.sensor_error[:, 3:]
+    return replace(seen, flow=seen.flow + flow_error, velocity=seen.velocity + flow_error, to_target=d + d_error)
 
 
 # From starts upstream of this x (the cylinder's side of the paper's regions) the paper's teacher reaches the

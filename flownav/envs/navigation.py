@@ -49,6 +49,9 @@ class NavigationEnv(EnvBase):
             first reset's starts, targets and headings are those of an env without it (later ones differ).
         flow_strength_full: the fraction of episodes that get the flow at full strength (1) instead of a
             draw in ``flow_strength``, so the hardest case keeps its weight in training.
+        sensor_noise: ``(flow, target)``: standard deviations of the ego views' sensors, fresh each step: the flow
+            reading's error per component (velocity units), the to-target vector's relative to its length
+            (:func:`flownav.envs.core.draw_sensor_error`). The geo and privileged views stay exact.
     """
 
     batch_locked = True
@@ -69,6 +72,7 @@ class NavigationEnv(EnvBase):
         random_flow_phase: bool = True,
         flow_strength: tuple[float, float] | None = None,
         flow_strength_full: float = 0.0,
+        sensor_noise: tuple[float, float] = (0.0, 0.0),
         seed: int | None = 0,
         device="cpu",
     ):
@@ -86,6 +90,9 @@ class NavigationEnv(EnvBase):
             raise ValueError(f"flow_strength_full is a fraction in [0, 1], got {flow_strength_full}")
         if flow_strength_full and flow_strength is None:
             raise ValueError("flow_strength_full needs flow_strength=[low, high] (the draw it replaces)")
+        sensor_noise = tuple(float(v) for v in sensor_noise)
+        if len(sensor_noise) != 2 or not all(v >= 0 for v in sensor_noise):
+            raise ValueError(f"sensor_noise is (flow, target), two standard deviations >= 0; got {sensor_noise}")
         super().__init__(device=device, batch_size=torch.Size([num_envs]))
         self.num_envs, self.views, self.time_limit = num_envs, check_views(views), float(time_limit)
         self.settings = Settings(
@@ -102,6 +109,7 @@ class NavigationEnv(EnvBase):
             random_flow_phase=random_flow_phase,
             flow_strength=flow_strength,
             flow_strength_full=float(flow_strength_full),
+            sensor_noise=sensor_noise,
         )
         self.flow = core.scene_flow(flow, self.settings, num_envs, self.device)
         self._make_specs()
@@ -159,6 +167,8 @@ class NavigationEnv(EnvBase):
                 f"the saved env state has {state['num_envs']} swimmers and a memory ring of "
                 f"{tuple(state['flow_ring'].shape)}; this env has {self.num_envs} and {tuple(ring.shape)}"
             )
+        # Env states saved before sensor noise existed hold no sensor_error: exact sensors, zeros.
+        state = {"sensor_error": self.state.sensor_error} | dict(state)
         saved = {k: state[k].to(self.device).clone() if torch.is_tensor(state[k]) else state[k] for k in SAVED_FIELDS}
         self.state = core.Swimmers(**saved, scene=self.state.scene)
         if isinstance(self.flow, FlowFamily):
@@ -183,7 +193,7 @@ class NavigationEnv(EnvBase):
         return self._observe().update({"done": false, "terminated": false.clone(), "truncated": false.clone()})
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
-        self.state, reward = core.step(self.state, tensordict.get("action"), self.flow, self.settings)
+        self.state, reward = core.step(self.state, tensordict.get("action"), self.flow, self.settings, self.rng)
         truncated = (self.state.status == Status.TIMEOUT)[:, None]
         terminated = (self.state.status != Status.RUNNING)[:, None] & ~truncated
         out = self._observe()

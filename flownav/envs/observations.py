@@ -38,6 +38,9 @@
   (``SceneRoutedTeacher``).
 * ``geo_priv_critic`` (27, its asymmetric critic): ``geo_priv`` plus the fraction of the episode's time
   left (what decides truncation, hence the value) and the flow velocity at the target.
+
+Sensor noise (``env.sensor_noise``, off by default) applies to the ego views only, the swimmer's on-board
+sensors (``SENSED_VIEWS``): the geo and privileged views are what the simulator knows, exactly.
 """
 
 from __future__ import annotations
@@ -145,6 +148,7 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "geo_priv_scene": (24, _geo_priv_scene),
 }
 MEMORY_VIEWS = ("ego_mem", "ego_mem_speed")
+SENSED_VIEWS = tuple(name for name in VIEWS if name.startswith("ego"))  # on-board sensors: env.sensor_noise
 PHASE_VIEWS = ("privileged",)
 GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic", "geo_priv_scene")  # the flow's gradient and time left
 SWIM_SPEED_VIEWS = (*GRADIENT_VIEWS, "ego_mem_speed")  # the swimmer's own full swim speed

@@ -1,0 +1,123 @@
+"""Sensor noise on the ego views (env.sensor_noise): what it changes, what it leaves exact, and that a noisy
+env resumes exactly."""
+
+import pytest
+import torch
+
+from flownav.builders import build_env, build_flow, build_task, compose_config
+from flownav.envs import ListTask, NavigationEnv
+from flownav.envs.kinematics import to_body
+from flownav.envs.observations import HISTORY_LEN
+from flownav.flows import Box, FunctionFlow
+
+BIG = Box((-100.0, -100.0, -100.0), (100.0, 100.0, 100.0))
+VIEWS = ("geo_priv", "ego_flow", "ego_mem")
+
+
+def swirl():
+    """A steady flow that varies in space, so readings differ from swimmer to swimmer."""
+    return FunctionFlow(
+        lambda p, t: torch.stack((torch.sin(p[:, 1]), torch.cos(p[:, 0]), 0.3 * torch.sin(p[:, 0] + p[:, 1])), -1),
+        bounds=BIG,
+        max_speed=1.5,
+    )
+
+
+def make(noise, n=4096, seed=3):
+    g = torch.Generator().manual_seed(0)
+    start = torch.rand(n, 3, generator=g) * 10
+    task = ListTask(start.tolist(), (start + torch.randn(n, 3, generator=g) * 5).tolist())
+    return NavigationEnv(swirl(), task, num_envs=n, views=VIEWS, time_limit=100.0, sensor_noise=noise, seed=seed)
+
+
+def run(env, steps, seed=1):
+    g = torch.Generator().manual_seed(seed)
+    td = env.reset()
+    out = [td]
+    for _ in range(steps):
+        action = torch.rand(env.num_envs, 3, generator=g) * torch.tensor([1.0, 1.0, 1.0]) - torch.tensor([0, 0.5, 0.5])
+        td = env.step(td.set("action", action))["next"]
+        out.append(td)
+    return out
+
+
+def test_noise_reaches_the_ego_views_only_with_the_configured_spread():
+    """Same seed and actions: the dynamics and the privileged view are exactly those of exact sensors; the ego
+    views' flow reading errs by sigma_flow per component and the to-target vector by sigma_target times its
+    length (body frame: a rotation keeps an isotropic error isotropic)."""
+    flow_std, target_std = 0.2, 0.05
+    exact, noisy = run(make((0.0, 0.0)), 12), run(make((flow_std, target_std)), 12)
+    for a, b in zip(exact, noisy, strict=True):
+        assert torch.equal(a["position"], b["position"]) and torch.equal(a["geo_priv"], b["geo_priv"])
+    a, b = exact[-1]["ego_flow"], noisy[-1]["ego_flow"]
+    flow_error = b[:, 3:] - a[:, 3:]
+    assert flow_error.std().item() == pytest.approx(flow_std, rel=0.05)
+    assert flow_error.mean().abs().item() < 0.02
+    target_error = (b[:, :3] - a[:, :3]) / a[:, :3].norm(dim=-1, keepdim=True)
+    assert target_error.std().item() == pytest.approx(target_std, rel=0.05)
+    earlier = noisy[-2]["ego_flow"][:, 3:] - exact[-2]["ego_flow"][:, 3:]
+    correlation = torch.corrcoef(torch.stack((flow_error.flatten(), earlier.flatten())))[0, 1]
+    assert abs(correlation.item()) < 0.05  # a fresh error each step
+
+
+def test_the_memory_keeps_each_reading_as_it_was_sensed():
+    """The newest memory sample is the current reading (the one ego_flow reports), and a reading stays as sensed
+    while it is remembered: four steps later it is the next sample, the same inertial vector seen from the new
+    heading."""
+    env = make((0.3, 0.0), n=64)
+    steps = run(env, 8)
+    now = steps[-1]["ego_mem"][:, 8:].view(-1, HISTORY_LEN, 3)
+    assert torch.allclose(now[:, 0], steps[-1]["ego_flow"][:, 3:], atol=1e-6)
+    before = steps[-5]["ego_mem"][:, 8:].view(-1, HISTORY_LEN, 3)[:, 0]
+    theta, psi = env.theta, env.psi
+    frame_then = _frames(steps[-5]["heading"])
+    inertial = torch.einsum("bij,bj->bi", frame_then, before)  # body -> inertial: R b
+    seen_now = to_body(_frames(torch.stack((theta, psi), -1)), inertial)
+    assert torch.allclose(now[:, 1], seen_now, atol=1e-5)
+
+
+def _frames(heading):
+    from flownav.envs.kinematics import body_frame
+
+    return body_frame(heading[:, 0], heading[:, 1])
+
+
+def test_a_noisy_env_resumes_exactly():
+    """The last reading's error is part of the saved state: a fresh env that loads it sees and steps identically."""
+    env = make((0.2, 0.1), n=32)
+    run(env, 5)
+    saved = env.state_dict()
+    twin = make((0.2, 0.1), n=32, seed=99)
+    twin.reset()
+    twin.load_state_dict(saved)
+    a, b = env._observe(), twin._observe()
+    assert torch.equal(a["ego_mem"], b["ego_mem"])
+    action = torch.full((32, 3), 0.5)
+    a = env.step(a.set("action", action))["next"]
+    b = twin.step(b.set("action", action))["next"]
+    assert torch.equal(a["ego_mem"], b["ego_mem"]) and torch.equal(a["ego_flow"], b["ego_flow"])
+
+
+def test_exact_sensors_draw_nothing_and_noisy_ones_draw_after_the_episode():
+    """With exact sensors a step draws nothing from the env's generator (every existing run keeps its random
+    streams); noisy sensors draw after a reset's other draws, so the first episodes are the same."""
+    exact, noisy = make((0.0, 0.0), n=16), make((0.1, 0.0), n=16)
+    a, b = exact.reset(), noisy.reset()
+    assert torch.equal(a["position"], b["position"]) and torch.equal(a["target"], b["target"])
+    exact_before, noisy_before = exact.rng.get_state(), noisy.rng.get_state()
+    for _ in range(3):
+        a = exact.step(a.set("action", torch.full((16, 3), 0.5)))["next"]
+        b = noisy.step(b.set("action", torch.full((16, 3), 0.5)))["next"]
+    assert torch.equal(exact.rng.get_state(), exact_before) and not exact.state.sensor_error.any()
+    assert not torch.equal(noisy.rng.get_state(), noisy_before)
+    with pytest.raises(ValueError, match=r"sensor_noise is \(flow, target\)"):
+        NavigationEnv(swirl(), num_envs=2, sensor_noise=(-1.0, 0.0))
+
+
+def test_the_config_key_reaches_the_env():
+    """env.sensor_noise.{flow,target} of the configs is the env's (flow, target)."""
+    cfg = compose_config(["obs=ego_mem", "env.sensor_noise.flow=0.15", "env.sensor_noise.target=0.02"])
+    flow = build_flow(cfg.flow)
+    env = build_env(cfg.env, flow, build_task(cfg.task, flow), ["ego_mem"], num_envs=4)
+    assert env.settings.sensor_noise == (0.15, 0.02) and env.settings.noisy
+    assert build_env(compose_config([]).env, flow, build_task(cfg.task, flow), ["ego_mem"], 4).settings.noisy is False
