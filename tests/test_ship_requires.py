@@ -114,3 +114,36 @@ def test_the_generalist_student_ships_only_if_it_holds_still_water_and_every_cur
     assert all(r["overrides"][0] == "flow=uniform" and "task=regions" in r["overrides"] for r in reqs.values())
     assert shipping.experiment_requirements("generalist_student_ego") == reqs  # built on it
     assert shipping.experiment_requirements("teacher") == {} and shipping.experiment_requirements("nope") == {}
+
+
+def test_the_noisy_student_ships_only_if_it_is_the_more_robust_policy_in_the_paper_wake():
+    """Its checks add the paper's wake (task and extended domain) at its training noise (the run's env) and at twice
+    it (an env override on the run's flow-free defaults, which differ from its env only in the noise)."""
+    from omegaconf import OmegaConf
+
+    from flownav.builders import compose_config
+    from flownav.evaluation.selection import training_spec
+    from flownav.flows.grid import GridFlow
+
+    base = shipping.experiment_requirements("generalist_student")
+    reqs = shipping.experiment_requirements("generalist_student_noisy")
+    added = {k: r for k, r in reqs.items() if k not in base}
+    assert {k: reqs[k] for k in base} == base and len(added) == 4
+    run_cfg = compose_config(["+experiment=generalist_student_noisy"])
+    payload = {"meta": {"config": OmegaConf.to_container(run_cfg, resolve=True)}}
+    noise = {}
+    for key, req in added.items():
+        spec = training_spec(payload, 10, req["overrides"])
+        assert isinstance(spec.flow, GridFlow), key  # the paper's wake, not the run's families
+        assert type(spec.task).__name__ == ("FixedTargetTask" if "extended" in key else "RegionTask"), key
+        env = OmegaConf.to_container(spec.env_cfg, resolve=True)
+        noise[key] = (env["sensor_noise"]["flow"], env["sensor_noise"]["target"])
+        assert {k: v for k, v in env.items() if k != "sensor_noise"} == {
+            k: v for k, v in OmegaConf.to_container(run_cfg.env, resolve=True).items() if k != "sensor_noise"
+        }
+    assert noise == {
+        "paper_task_noise_0.1": (0.1, 0.05),
+        "extended_noise_0.1": (0.1, 0.05),
+        "paper_task_noise_0.2": (0.2, 0.1),
+        "extended_noise_0.2": (0.2, 0.1),
+    }
