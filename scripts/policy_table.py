@@ -18,6 +18,7 @@ POLICIES = {
     "student": "student (paper)",
     "student_robust": "student_robust",
     "generalist_student": "**generalist_student** (`ego_mem`)",
+    "generalist_student_noisy": "generalist_student_noisy (`ego_mem`, trained with noisy sensors)",
 }
 
 

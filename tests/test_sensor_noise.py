@@ -121,3 +121,24 @@ def test_the_config_key_reaches_the_env():
     env = build_env(cfg.env, flow, build_task(cfg.task, flow), ["ego_mem"], num_envs=4)
     assert env.settings.sensor_noise == (0.15, 0.02) and env.settings.noisy
     assert build_env(compose_config([]).env, flow, build_task(cfg.task, flow), ["ego_mem"], 4).settings.noisy is False
+
+
+def test_the_noise_suite_compares_only_policies_that_sense_and_applies_its_noise():
+    """``+experiment=sensor_noise``: every section noisy, and only ego policies in it (scripted references and the
+    oracle read the exact state, so a noise table with them would compare exact against sensed)."""
+    from hydra import compose, initialize_config_dir
+
+    from flownav.envs.observations import SENSED_VIEWS
+    from flownav.paths import REPO_ROOT
+
+    with initialize_config_dir(config_dir=str(REPO_ROOT / "conf" / "evaluate"), version_base="1.3"):
+        cfg = compose("config", overrides=["+experiment=sensor_noise"])
+    levels = set()
+    for name, suite in cfg.suite.items():
+        noise = suite.env.sensor_noise
+        assert noise.flow > 0 and noise.target > 0, name
+        levels.add((noise.flow, noise.target))
+        sensed = [cfg.policies[p].obs in SENSED_VIEWS and "checkpoint" in cfg.policies[p] for p in suite.policies]
+        assert all(sensed), name
+    assert levels == {(0.1, 0.05), (0.2, 0.1)}
+    assert "generalist_student_noisy" in cfg.suite.noise_020_paper.policies
