@@ -1,14 +1,17 @@
-"""The zoo's turned wakes seen by a policy whose view turns with the swimmer: the wake turned by an angle about
-(9, 0) with the paper's task, against the wake as posed with the task turned back by that angle. An ego view reads
-the flow and the target in the body frame and the vertical, so it cannot tell the two apart (rotations about z):
-its success must agree up to rounding, and its failure in a turned wake is a failure on a task in the wake it
-was trained in. Head-to-target (geo view) only reads the direction to the target, so it agrees too.
+"""The zoo's turned wakes seen by a policy whose view turns with the swimmer: the zoo case ``wake_turned_<angle>``
+(the wake turned by that angle about its centre, the paper's task) against the wake as posed with the task turned
+back by that angle. An ego view reads the flow and the target in the body frame and the vertical, and the initial
+headings are uniform at random in both, so the two are the same navigation problem in distribution (not episode by
+episode: a heading is drawn in the frame of the box, not of the flow): the success rates agree within sampling
+error, and a failure in a turned wake is a failure on a task in the wake the policy was trained in. Head-to-target
+reads only the direction to the target, so it agrees too.
 
     python scripts/turned_wake_as_task.py                  # 135 degrees, 10,000 episodes, the generalist students
-    python scripts/turned_wake_as_task.py 180 2000         # another angle, fewer episodes
+    python scripts/turned_wake_as_task.py 180 2000         # another zoo angle, fewer episodes
 
-Same starts and targets in both (uniform in the zoo case's Region 1 and Region 2, seed 123), the protocol's
-headings and flow phases (seed EVAL_SEED). docs/generalist.md quotes it.
+The case's flow and task come from conf/evaluate/experiment/generalization.yaml. Same starts and targets in both
+(uniform in the task's boxes, seed 123), the protocol's headings and flow phases (seed EVAL_SEED). docs/generalist.md
+quotes it.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import math
 import sys
 
 import torch
+from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from flownav.builders import build_flow, compose_config
@@ -26,41 +30,47 @@ from flownav.evaluation.protocol import EvalSpec, evaluate
 from flownav.evaluation.scripted import SCRIPTED, scripted_view
 from flownav.paths import REPO_ROOT
 
-CENTRE = (9.0, 0.0)  # the zoo's turned wakes turn about it (conf/evaluate/experiment/generalization.yaml)
-START = ((8.0, 2.0, 3.0), (12.0, 4.0, 7.0))  # the zoo case's task: Region 1 -> Region 2
-TARGET = ((8.0, -4.0, 3.0), (12.0, -2.0, 7.0))
 POLICIES = ("checkpoints/generalist_student.pt", "checkpoints/generalist_student_noisy.pt", "scripted:head_to_target")
 
 
-def turned(points: torch.Tensor, deg: float) -> torch.Tensor:
-    """``points`` turned by ``deg`` about z through CENTRE."""
+def zoo_case(deg: float):
+    """(flow config, start box, target box) of the zoo case ``wake_turned_<deg>``."""
+    with initialize_config_dir(config_dir=str(REPO_ROOT / "conf" / "evaluate"), version_base="1.3"):
+        cfg = compose("config", overrides=["+experiment=generalization"])
+    case = cfg.suite.generalization.cases[f"wake_turned_{deg:g}"]
+    return OmegaConf.to_container(case.flow, resolve=True), case.task.start, case.task.target
+
+
+def turned(points: torch.Tensor, deg: float, centre) -> torch.Tensor:
+    """``points`` turned by ``deg`` about z through ``centre`` (x, y)."""
     a = math.radians(deg)
-    x, y = points[:, 0] - CENTRE[0], points[:, 1] - CENTRE[1]
+    x, y = points[:, 0] - centre[0], points[:, 1] - centre[1]
     out = points.clone()
-    out[:, 0] = CENTRE[0] + math.cos(a) * x - math.sin(a) * y
-    out[:, 1] = CENTRE[1] + math.sin(a) * x + math.cos(a) * y
+    out[:, 0] = centre[0] + math.cos(a) * x - math.sin(a) * y
+    out[:, 1] = centre[1] + math.sin(a) * x + math.cos(a) * y
     return out
 
 
 def uniform_in(box, n: int, g: torch.Generator) -> torch.Tensor:
-    lo, hi = torch.tensor(box[0]), torch.tensor(box[1])
+    lo, hi = torch.tensor(list(box[0])), torch.tensor(list(box[1]))
     return lo + torch.rand(n, 3, generator=g) * (hi - lo)
 
 
 def compare(policy, view: str, deg: float, episodes: int) -> dict:
     """The protocol's summaries of ``policy`` (reading ``view``) in the two cases, by case name."""
+    turned_wake, start_box, target_box = zoo_case(deg)
+    centre = turned_wake["rotate_center"]
+    posed_wake = {k: v for k, v in turned_wake.items() if k not in ("rotate_deg", "rotate_center")}
     g = torch.Generator().manual_seed(123)
-    starts, targets = uniform_in(START, episodes, g), uniform_in(TARGET, episodes, g)
-    wake = {"type": "grid", "path": str(REPO_ROOT / "data" / "cylinder_re300")}
-    turned_wake = wake | {"rotate_deg": deg, "rotate_center": list(CENTRE)}
+    starts, targets = uniform_in(start_box, episodes, g), uniform_in(target_box, episodes, g)
     cases = {
         f"the wake turned by {deg:g}, the paper's task": (turned_wake, 0.0),
-        f"the wake as posed, the task turned by {-deg:g}": (wake, -deg),
+        f"the wake as posed, the task turned by {-deg:g}": (posed_wake, -deg),
     }
     env_cfg = compose_config([]).env
     out = {}
     for case, (flow_cfg, task_deg) in cases.items():
-        task = ListTask(turned(starts, task_deg), turned(targets, task_deg))
+        task = ListTask(turned(starts, task_deg, centre), turned(targets, task_deg, centre))
         spec = EvalSpec(build_flow(OmegaConf.create(flow_cfg)), task, env_cfg, episodes)
         out[case] = evaluate(policy, view, spec).summary
     return out
