@@ -23,69 +23,47 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from flownav.builders import build_flow, compose_config
-from flownav.checkpoint import load_policy
+from flownav.builders import build_task
 from flownav.envs import ListTask
+from flownav.evaluation.experiments import Suite
 from flownav.evaluation.protocol import EvalSpec, evaluate
-from flownav.evaluation.scripted import SCRIPTED, scripted_view
+from flownav.flows.transforms import rotate_z
 from flownav.paths import REPO_ROOT
 
-POLICIES = ("checkpoints/generalist_student.pt", "checkpoints/generalist_student_noisy.pt", "scripted:head_to_target")
+POLICIES = ("generalist_student", "generalist_student_noisy", "head_to_target")  # names in the suite's `policies`
 
 
-def zoo_case(deg: float):
-    """(flow config, start box, target box) of the zoo case ``wake_turned_<deg>``."""
+def zoo_suite() -> Suite:
+    """The generalisation suite (its cases, policies and env), to load flows and policies once."""
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf" / "evaluate"), version_base="1.3"):
-        cfg = compose("config", overrides=["+experiment=generalization"])
-    case = cfg.suite.generalization.cases[f"wake_turned_{deg:g}"]
-    return OmegaConf.to_container(case.flow, resolve=True), case.task.start, case.task.target
+        return Suite(compose("config", overrides=["+experiment=generalization"]))
 
 
-def turned(points: torch.Tensor, deg: float, centre) -> torch.Tensor:
-    """``points`` turned by ``deg`` about z through ``centre`` (x, y)."""
-    a = math.radians(deg)
-    x, y = points[:, 0] - centre[0], points[:, 1] - centre[1]
-    out = points.clone()
-    out[:, 0] = centre[0] + math.cos(a) * x - math.sin(a) * y
-    out[:, 1] = centre[1] + math.sin(a) * x + math.cos(a) * y
-    return out
-
-
-def uniform_in(box, n: int, g: torch.Generator) -> torch.Tensor:
-    lo, hi = torch.tensor(list(box[0])), torch.tensor(list(box[1]))
-    return lo + torch.rand(n, 3, generator=g) * (hi - lo)
-
-
-def compare(policy, view: str, deg: float, episodes: int) -> dict:
-    """The protocol's summaries of ``policy`` (reading ``view``) in the two cases, by case name."""
-    turned_wake, start_box, target_box = zoo_case(deg)
+def compare(suite: Suite, name: str, deg: float, episodes: int) -> dict:
+    """The protocol's summaries of the suite's policy ``name`` in the two cases, by case name."""
+    policy, view, _ = suite.policy(name)
+    case = suite.cfg.suite.generalization.cases[f"wake_turned_{deg:g}"]
+    turned_wake = OmegaConf.to_container(case.flow, resolve=True)
     centre = turned_wake["rotate_center"]
     posed_wake = {k: v for k, v in turned_wake.items() if k not in ("rotate_deg", "rotate_center")}
-    g = torch.Generator().manual_seed(123)
-    starts, targets = uniform_in(start_box, episodes, g), uniform_in(target_box, episodes, g)
-    cases = {
-        f"the wake turned by {deg:g}, the paper's task": (turned_wake, 0.0),
-        f"the wake as posed, the task turned by {-deg:g}": (posed_wake, -deg),
-    }
-    env_cfg = compose_config([]).env
+    task = build_task(case.task, suite.flow(turned_wake))
+    starts, targets = task.sample(episodes, torch.Generator().manual_seed(123))
     out = {}
-    for case, (flow_cfg, task_deg) in cases.items():
-        task = ListTask(turned(starts, task_deg, centre), turned(targets, task_deg, centre))
-        spec = EvalSpec(build_flow(OmegaConf.create(flow_cfg)), task, env_cfg, episodes)
-        out[case] = evaluate(policy, view, spec).summary
+    for label, flow_cfg, task_deg in (
+        (f"the wake turned by {deg:g}, the paper's task", turned_wake, 0.0),
+        (f"the wake as posed, the task turned by {-deg:g}", posed_wake, -deg),
+    ):
+        angle = math.radians(task_deg)
+        task = ListTask(rotate_z(starts, angle, centre), rotate_z(targets, angle, centre))
+        out[label] = evaluate(policy, view, EvalSpec(suite.flow(flow_cfg), task, suite.cfg.env, episodes)).summary
     return out
 
 
 def main(deg: float = 135.0, episodes: int = 10_000) -> None:
     torch.set_num_threads(1)
+    suite = zoo_suite()
     for name in POLICIES:
-        if name.startswith("scripted:"):
-            policy = SCRIPTED[name.split(":", 1)[1]]()
-            view = scripted_view(policy)
-        else:
-            policy, payload = load_policy(REPO_ROOT / name)
-            view = payload["obs"]
-        for case, r in compare(policy, view, deg, episodes).items():
+        for case, r in compare(suite, name, deg, episodes).items():
             lo, hi = r["success_ci95"]
             fails = ", ".join(f"{k} {v['count']}" for k, v in r["failures"].items())
             print(f"{name} | {case}: {100 * r['success_rate']:.2f}% [{100 * lo:.2f}, {100 * hi:.2f}] ({fails})")

@@ -120,13 +120,10 @@ def test_to_an_ego_student_the_turned_wake_is_the_posed_wake_with_the_task_turne
     starts and targets the success rates agree within sampling error (about 1.3 points), head-to-target's too."""
     from load import load_module
 
-    from flownav.checkpoint import load_policy
-    from flownav.evaluation.scripted import HeadToTarget
-
     script = load_module("scripts/turned_wake_as_task.py")
-    policy, payload = load_policy(REPO_ROOT / "checkpoints" / "generalist_student.pt")
-    turned, posed = script.compare(policy, payload["obs"], 135.0, 2000).values()
+    suite = script.zoo_suite()
+    turned, posed = script.compare(suite, "generalist_student", 135.0, 2000).values()
     assert 0.05 < turned["success_rate"] < 0.6  # a case the student neither always solves nor always fails
     assert abs(turned["success_rate"] - posed["success_rate"]) <= 0.03
-    h_turned, h_posed = script.compare(HeadToTarget(), "geo", 135.0, 2000).values()
+    h_turned, h_posed = script.compare(suite, "head_to_target", 135.0, 2000).values()
     assert h_turned["success_rate"] > 0.05 and abs(h_turned["success_rate"] - h_posed["success_rate"]) <= 0.03
