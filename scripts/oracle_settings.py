@@ -24,7 +24,7 @@ from flownav.evaluation.protocol import EvalSpec, evaluate
 from flownav.paths import REPO_ROOT
 
 ABC_SETTINGS = ({}, {"horizon": 100, "candidates": 48, "iterations": 2}, {"horizon": 30})
-# The extended domain: the zoo's settings, wider searches, then longer horizons with finer blocks.
+# The extended domain: the default settings, wider searches, then longer horizons with finer blocks.
 EXTENDED_SETTINGS = (
     {},
     {"candidates": 256, "iterations": 4},
