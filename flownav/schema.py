@@ -343,6 +343,7 @@ DAGGER = {
     "scene_reverse_expert": Str(null=True),
     "scene_away_expert": Str(null=True),
     "scene_wake_expert": Str(null=True),
+    "scene_posed_expert": Str(null=True),
     "scene_currents": Str(choices=("all", "vertical"), null=True),
     "final_eval_episodes": Int(ge=0),
     "results_json": Str(null=True),

@@ -47,10 +47,12 @@ def test_paper_scene_in_a_family_marks_only_the_posed_wake_member_with_the_paper
     member = env.flow.params["member"]
     papers = (member == 0) & (env.state.swim_scale == 1) & REGION_2.contains(env.state.target)
     assert 100 < papers.sum() < 2048 and torch.equal((flags >= 1) & (flags <= 4), papers)
-    # every other full-speed episode in a wake, turned or posed, is the wake scene (5); a current's are 6
+    # any other task of a full-speed swimmer in the posed wake is 7, in the turned wake 5; a current's are 6
     full = env.state.swim_scale == 1
-    wake = (member < 2) & ~papers & full
-    assert 100 < wake.sum() and torch.equal(flags == 5, wake) and torch.equal(flags == 6, member == 2)
+    posed_other, turned = (member == 0) & ~papers & full, (member == 1) & full
+    assert 100 < posed_other.sum() and 100 < turned.sum()
+    assert torch.equal(flags == 7, posed_other) and torch.equal(flags == 5, turned)
+    assert torch.equal(flags == 6, member == 2)
     assert torch.equal(flags == 0, (member < 2) & ~full)  # a weaker swimmer in a wake: none
     # geo_priv_scene is geo_priv plus the flag
     both = NavigationEnv(flow, task, num_envs=64, views=("geo_priv", "geo_priv_scene"), seed=1).reset()
@@ -93,6 +95,20 @@ def test_the_papers_target_from_elsewhere_goes_to_the_away_expert_or_else_the_pa
     away = SceneRoutedTeacher(generalist, expert, away=Constant([0.4, 0.1, 0.2], 23))(obs)  # reads geo_priv
     assert torch.equal(away[[0, 3]], torch.tensor([[0.4, 0.1, 0.2]]).expand(2, 3))
     assert torch.equal(away[[1, 2, 4]], plain[[1, 2, 4]])
+
+
+def test_other_tasks_in_the_posed_wake_go_to_the_posed_expert_or_else_the_wake_expert():
+    generalist, expert = Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9)
+    wake, posed = Constant([0.4, 0.1, 0.2], 23), Constant([-0.3, 0.6, -0.7], 23)
+    obs = torch.randn(4, 24)
+    obs[:, -1] = torch.tensor([7.0, 5.0, 0.0, 7.0])
+    plain = SceneRoutedTeacher(generalist, expert)(obs)
+    assert torch.equal(plain, torch.tensor([[0.1, 0.2, 0.3]]).expand(4, 3))  # neither given: the generalist
+    with_wake = SceneRoutedTeacher(generalist, expert, wake=wake)(obs)
+    assert torch.equal(with_wake[[0, 1, 3]], torch.tensor([[0.4, 0.1, 0.2]]).expand(3, 3))
+    both = SceneRoutedTeacher(generalist, expert, wake=wake, posed=posed)(obs)
+    assert torch.equal(both[[0, 3]], torch.tensor([[-0.3, 0.6, -0.7]]).expand(2, 3))
+    assert torch.equal(both[[1, 2]], with_wake[[1, 2]])
 
 
 def test_an_episode_that_starts_upstream_in_the_papers_scene_is_coded_2_all_along():
@@ -207,7 +223,11 @@ def test_scene_routing_needs_the_generalist_view_and_one_action_box():
     routed = scene_routed(
         generalist, "geo_priv", {"scene_expert": ("t.pt", expert), "scene_wake_expert": ("w.pt", wake)}
     )
-    assert routed.wake is wake and routed.away is None
+    assert routed.wake is wake and routed.away is None and routed.posed is None
+    routed = scene_routed(
+        generalist, "geo_priv", {"scene_expert": ("t.pt", expert), "scene_posed_expert": ("p.pt", wake)}
+    )
+    assert routed.posed is wake and routed.wake is None
     other = DeterministicPolicy(9, LOW, [2.0, 0.785, 1.571], hidden=[8])
     with pytest.raises(CheckpointError, match="algo.scene_reverse_expert other.pt acts in another action box"):
         scene_routed(

@@ -1,25 +1,26 @@
 """A privileged teacher made of two: the paper's teacher in the paper's scene, the generalist teacher elsewhere.
 
-The generalist PPO teacher (``geo_priv``) learns little of the wake crossing: the paper's task is a small share
-of its families. The paper's teacher (``geo_sincos``) crosses that wake in 99% of episodes and fails elsewhere.
-:class:`SceneRoutedTeacher` reads ``geo_priv_scene`` (``geo_priv`` plus the simulator's flag "this swimmer is
-in the paper's training task as posed", flownav.envs.core.paper_scene) and lets each act where it is good, so
-that a DAgger student over the families imitates the better teacher of each scene. Episodes of that scene which
-start upstream of the paper's regions (flag 2: the extended domain, ``task.posed_wake_any_start_share``) go to the
-flow-compensating expert (flownav/agents/flow_compensating.py), which reaches the target from there where the
-paper's teacher mostly does not. The crossing the other way (flag 3: Region 2 to Region 1,
-``task.posed_wake_reverse_share``) goes to an expert of that crossing when one is given (``algo.scene_reverse_expert``,
-e.g. the paper's SI-2 teacher ``checkpoints/teacher_symmetric.pt``), else to the generalist. Episodes of the paper's
-target from any other start (flag 4: the rest of the extended domain, ``posed_wake_any_start_box`` beyond x = 4) go
-to ``algo.scene_away_expert`` when one is given (a ``geo_priv`` checkpoint, e.g. a network that imitates the oracle
+The generalist PPO teacher (``geo_priv``) learns little of the wake crossing: the paper's task is a small share of
+its families. The paper's teacher (``geo_sincos``) crosses that wake in 99% of episodes and fails elsewhere.
+:class:`SceneRoutedTeacher` reads ``geo_priv_scene`` (``geo_priv`` plus the simulator's flag "this swimmer is in the
+paper's training task as posed", flownav.envs.core.paper_scene) and lets each act where it is good, so that a DAgger
+student over the families imitates the better teacher of each scene. Episodes of that scene which start upstream of
+the paper's regions (flag 2: the extended domain, ``task.posed_wake_any_start_share``) go to the flow-compensating
+expert (flownav/agents/flow_compensating.py), which reaches the target from there where the paper's teacher mostly
+does not. The crossing the other way (flag 3: Region 2 to Region 1, ``task.posed_wake_reverse_share``) goes to an
+expert of that crossing when one is given (``algo.scene_reverse_expert``, e.g. the paper's SI-2 teacher
+``checkpoints/teacher_symmetric.pt``), else to the generalist. Episodes of the paper's target from any other start
+(flag 4: the rest of the extended domain, ``posed_wake_any_start_box`` beyond x = 4) go to
+``algo.scene_away_expert`` when one is given (a ``geo_priv`` checkpoint, e.g. a network that imitates the oracle
 there: +experiment=generalist_away_expert), else to the paper's teacher. Every other episode in a CFD wake of the
-families (flag 5: turned, scaled, on a current, or as posed with another task) goes to
-``algo.scene_wake_expert`` when one is given (a ``geo_priv`` checkpoint, e.g. a network that imitates the oracle
-over the wake family: +experiment=generalist_wake_expert), else to the generalist; only full-speed swimmers are
-flagged there (a weaker swimmer's wake episode keeps flag 0). Episodes in a uniform current or still water of the
-families (flag 6) go to the flow-compensating expert with ``algo.scene_currents=all`` (there it swims the straight,
-fastest track), only the mostly vertical ones (|u_z| > |u_xy|) with ``algo.scene_currents=vertical``, else to the
-generalist.
+families (flag 5: turned, scaled or on a current) goes to ``algo.scene_wake_expert`` when one is given (a
+``geo_priv`` checkpoint, e.g. a network that imitates the oracle over the wake family:
++experiment=generalist_wake_expert), else to the generalist; so does any other task in the wake as posed (flag 7)
+unless ``algo.scene_posed_expert`` is given (a ``geo_priv`` network that imitates the oracle there:
++experiment=generalist_posed_expert). Only full-speed swimmers are flagged there (a weaker swimmer's wake episode
+keeps flag 0). Episodes in a uniform current or still water of the families (flag 6) go to the flow-compensating
+expert with ``algo.scene_currents=all`` (there it swims the straight, fastest track), only the mostly vertical ones
+(|u_z| > |u_xy|) with ``algo.scene_currents=vertical``, else to the generalist.
 """
 
 from __future__ import annotations
@@ -28,7 +29,15 @@ import torch
 from torch import nn
 
 from flownav.agents.flow_compensating import FlowCompensating
-from flownav.envs.core import SCENE_AWAY, SCENE_CURRENT, SCENE_PAPER, SCENE_REVERSE, SCENE_UPSTREAM, SCENE_WAKE
+from flownav.envs.core import (
+    SCENE_AWAY,
+    SCENE_CURRENT,
+    SCENE_PAPER,
+    SCENE_POSED,
+    SCENE_REVERSE,
+    SCENE_UPSTREAM,
+    SCENE_WAKE,
+)
 from flownav.envs.observations import GEO_PRIV_FLOW, observation_size
 from flownav.errors import CheckpointError
 
@@ -40,6 +49,7 @@ EXPERT_VIEWS = {
     "scene_reverse_expert": EXPERT_VIEW,
     "scene_away_expert": GENERALIST_VIEW,
     "scene_wake_expert": GENERALIST_VIEW,
+    "scene_posed_expert": GENERALIST_VIEW,
 }
 CURRENT_ROUTES = (None, "all", "vertical")  # algo.scene_currents: which currents the flow-compensating expert labels
 
@@ -47,7 +57,8 @@ CURRENT_ROUTES = (None, "all", "vertical")  # algo.scene_currents: which current
 class SceneRoutedTeacher(nn.Module):
     """The expert of each row's paper-scene code (the view's last entry, flownav.envs.core.paper_scene):
     ``expert`` for SCENE_PAPER, the flow-compensating expert for SCENE_UPSTREAM, ``reverse`` (if given) for
-    SCENE_REVERSE, ``away`` (if given; else ``expert``) for SCENE_AWAY, ``wake`` (if given) for SCENE_WAKE, the
+    SCENE_REVERSE, ``away`` (if given; else ``expert``) for SCENE_AWAY, ``wake`` (if given) for SCENE_WAKE, ``posed``
+    (if given; else as SCENE_WAKE) for SCENE_POSED, the
     flow-compensating expert for SCENE_CURRENT if ``currents`` is ``"all"`` (only where the current is mostly
     vertical if ``"vertical"``), ``generalist`` elsewhere. ``expert`` and
     ``reverse`` read the first 9 numbers of the view (``geo_priv`` begins with ``geo_sincos``), the others all but
@@ -62,9 +73,11 @@ class SceneRoutedTeacher(nn.Module):
         away: nn.Module | None = None,
         wake: nn.Module | None = None,
         currents: str | None = None,
+        posed: nn.Module | None = None,
     ):
         super().__init__()
         self.generalist, self.expert, self.reverse, self.away, self.wake = generalist, expert, reverse, away, wake
+        self.posed = posed
         if currents not in CURRENT_ROUTES:
             raise ValueError(f"currents is {currents!r}; choose one of {CURRENT_ROUTES}")
         self.currents = currents
@@ -84,7 +97,10 @@ class SceneRoutedTeacher(nn.Module):
         if self.reverse is not None:
             out = torch.where(code == SCENE_REVERSE, self.reverse(geo), out)
         if self.wake is not None:
-            out = torch.where(code == SCENE_WAKE, self.wake(view), out)
+            wake = (code == SCENE_WAKE) | ((code == SCENE_POSED) & (self.posed is None))
+            out = torch.where(wake, self.wake(view), out)
+        if self.posed is not None:
+            out = torch.where(code == SCENE_POSED, self.posed(view), out)
         paper = self.expert(geo)
         out = torch.where(code == SCENE_AWAY, paper if self.away is None else self.away(view), out)
         return torch.where(code == SCENE_PAPER, paper, out)
@@ -94,8 +110,9 @@ def scene_routed(
     generalist: nn.Module, generalist_view: str, experts: dict, currents: str | None = None
 ) -> SceneRoutedTeacher:
     """The routed teacher of a ``geo_priv`` generalist and its experts: ``experts`` maps the config key
-    (``algo.scene_expert``, optionally ``algo.scene_reverse_expert``, ``algo.scene_away_expert`` and
-    ``algo.scene_wake_expert``) to (checkpoint name, loaded policy); ``currents``: ``algo.scene_currents``."""
+    (``algo.scene_expert``, optionally ``algo.scene_reverse_expert``, ``algo.scene_away_expert``,
+    ``algo.scene_wake_expert`` and ``algo.scene_posed_expert``) to (checkpoint name, loaded policy);
+    ``currents``: ``algo.scene_currents``."""
     if generalist_view != GENERALIST_VIEW:
         raise CheckpointError(
             f"algo.scene_expert routes between a {GENERALIST_VIEW!r} teacher and the paper's; the teacher checkpoint "
@@ -114,4 +131,5 @@ def scene_routed(
         away=loaded.get("scene_away_expert"),
         wake=loaded.get("scene_wake_expert"),
         currents=currents,
+        posed=loaded.get("scene_posed_expert"),
     )

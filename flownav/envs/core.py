@@ -455,6 +455,7 @@ def sensed_state(seen: State, state: Swimmers, settings: Settings) -> State:
 UPSTREAM_X = 4.0
 # The codes of paper_scene: which expert of a scene-routed teacher labels a swimmer (flownav/agents/scene_router.py).
 SCENE_NONE, SCENE_PAPER, SCENE_UPSTREAM, SCENE_REVERSE, SCENE_AWAY, SCENE_WAKE, SCENE_CURRENT = 0, 1, 2, 3, 4, 5, 6
+SCENE_POSED = 7
 
 
 def paper_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tensor | None = None) -> Tensor:
@@ -463,8 +464,9 @@ def paper_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tenso
     at its full speed, and SCENE_PAPER: the target in Region 2 from a start in Region 1 (the paper's training
     task); SCENE_UPSTREAM: that target for an episode that started upstream of ``UPSTREAM_X``; SCENE_AWAY: that
     target from any other start (the rest of the extended domain); SCENE_REVERSE: from Region 2 to a target in
-    Region 1 (the crossing the other way, paper SI 2); SCENE_WAKE: any other episode of a full-speed swimmer in a
-    family slot whose flow is a CFD wake (turned, scaled, on a current, or as posed with another task);
+    Region 1 (the crossing the other way, paper SI 2); SCENE_POSED: any other task of a full-speed swimmer in a
+    family slot whose flow is the wake as posed; SCENE_WAKE: any other episode of a full-speed swimmer in a family
+    slot whose flow is a CFD wake (turned, scaled or on a current);
     SCENE_CURRENT: an episode in a family slot whose flow is a uniform current or still water; else SCENE_NONE.
     What the simulator knows and a scene-routed teacher reads."""
     slots = torch.arange(state.pos.shape[0], device=state.pos.device) if idx is None else idx
@@ -483,6 +485,7 @@ def paper_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tenso
     code = torch.where(REGION_1.contains(start), SCENE_PAPER, SCENE_AWAY)
     code = torch.where(start[:, 0] < UPSTREAM_X, SCENE_UPSTREAM, code)
     other = torch.where(wake, SCENE_WAKE, torch.where(current, SCENE_CURRENT, SCENE_NONE))
+    other = torch.where(posed & wake, SCENE_POSED, other)
     code = torch.where(forward, code, other)
     return torch.where(reverse, SCENE_REVERSE, code)
 
