@@ -97,7 +97,9 @@ class SceneRoutedTeacher(nn.Module):
         if self.reverse is not None:
             out = torch.where(code == SCENE_REVERSE, self.reverse(geo), out)
         if self.wake is not None:
-            wake = (code == SCENE_WAKE) | ((code == SCENE_POSED) & (self.posed is None))
+            wake = code == SCENE_WAKE
+            if self.posed is None:  # the posed wake's other tasks go where the other wakes' go
+                wake = wake | (code == SCENE_POSED)
             out = torch.where(wake, self.wake(view), out)
         if self.posed is not None:
             out = torch.where(code == SCENE_POSED, self.posed(view), out)
