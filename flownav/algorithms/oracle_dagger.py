@@ -50,7 +50,7 @@ NON_FINITE_FIX = "check algo.lr and the oracle's labels (a non-finite flow?)"
 
 def oracle_settings(a) -> dict:
     """The expert's settings: those of the suite's oracle ``algo.oracle`` (conf/evaluate/config.yaml: ``oracle``,
-    the zoo's; ``oracle_long``, the ABC one), with ``algo.oracle_settings`` replacing any of them."""
+    12 time units ahead; ``oracle_long``, the ABC one), with ``algo.oracle_settings`` replacing any of them."""
     suite = OmegaConf.load(REPO_ROOT / "conf" / "evaluate" / "config.yaml")
     named = OmegaConf.to_container(suite.policies[str(a.oracle)].settings)
     return named | OmegaConf.to_container(a.get("oracle_settings") or OmegaConf.create({}))

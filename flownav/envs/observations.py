@@ -32,8 +32,8 @@
 * ``geo_priv_scene`` (24, a scene-routed teacher's view): ``geo_priv`` plus 1 where the swimmer is in the
   paper's training task as posed (the unturned CFD wake at strength 1, full swim speed, the target in Region
   2), 2 there when its episode started upstream of the paper's regions, 4 from any other start, 3 from Region 2
-  to a target in Region 1, 5 in any other full-speed episode in a CFD wake of the families, 6 in their uniform
-  currents and still water, else 0
+  to a target in Region 1, 7 with any other task there (a family slot), 5 in any other full-speed episode in a
+  CFD wake of the families, 6 in their uniform currents and still water, else 0
   (``flownav.envs.core.paper_scene``): what a teacher needs to hand those episodes to their experts
   (``SceneRoutedTeacher``).
 * ``geo_priv_critic`` (27, its asymmetric critic): ``geo_priv`` plus the fraction of the episode's time
@@ -71,7 +71,7 @@ class State:
     swim_speed: Tensor | None = None  # [N] the swimmer's full swim speed
     time_left: Tensor | None = None  # [N] fraction of the time limit left; privileged views only
     target_flow: Tensor | None = None  # [N, 3] flow velocity at the target; geo_priv_critic only
-    paper_scene: Tensor | None = None  # [N] the paper's scene code (core.paper_scene: 0-6); geo_priv_scene only
+    paper_scene: Tensor | None = None  # [N] the paper's scene code (core.paper_scene: 0-7); geo_priv_scene only
 
 
 # The memory of ``ego_mem``: HISTORY_LEN flow samples, HISTORY_STRIDE steps apart (newest first). With
