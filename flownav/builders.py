@@ -220,9 +220,11 @@ def build_env(
         raise ConfigError(f"env: {e}") from e
 
 
-def compose_config(overrides=()):
-    """train.py's config (``conf/config.yaml``) with Hydra ``overrides``, composed outside a Hydra app."""
+def compose_config(overrides=(), app: str = "train"):
+    """An app's config with Hydra ``overrides``, composed outside a Hydra app: train.py's (``conf/config.yaml``) or,
+    with ``app="evaluate"``, evaluate.py's (``conf/evaluate/config.yaml``)."""
     from hydra import compose, initialize_config_dir  # Hydra only for callers that compose
 
-    with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
+    config_dir = {"train": REPO_ROOT / "conf", "evaluate": REPO_ROOT / "conf" / "evaluate"}[app]
+    with initialize_config_dir(config_dir=str(config_dir), version_base="1.3"):
         return compose("config", overrides=list(overrides))

@@ -20,23 +20,20 @@ import math
 import sys
 
 import torch
-from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from flownav.builders import build_task
+from flownav.builders import build_task, compose_config
 from flownav.envs import ListTask
 from flownav.evaluation.experiments import Suite
 from flownav.evaluation.protocol import EvalSpec, evaluate
 from flownav.flows.transforms import rotate_z
-from flownav.paths import REPO_ROOT
 
 POLICIES = ("generalist_student", "generalist_student_noisy", "head_to_target")  # names in the suite's `policies`
 
 
 def zoo_suite() -> Suite:
     """The generalisation suite (its cases, policies and env), to load flows and policies once."""
-    with initialize_config_dir(config_dir=str(REPO_ROOT / "conf" / "evaluate"), version_base="1.3"):
-        return Suite(compose("config", overrides=["+experiment=generalization"]))
+    return Suite(compose_config(["+experiment=generalization"], app="evaluate"))
 
 
 def compare(suite: Suite, name: str, deg: float, episodes: int) -> dict:
