@@ -14,7 +14,7 @@ from flownav.envs.observations import GEO_PRIV_FLOW, observation_size
 from flownav.envs.tasks import REGION_1, REGION_2, FamilyTask, RegionTask
 from flownav.errors import CheckpointError
 from flownav.flows.base import WAKE_BOUNDS
-from flownav.flows.families import MixtureFamily, SumFamily, TransformedFamily, UniformFamily
+from flownav.flows.families import FourierFamily, MixtureFamily, SumFamily, TransformedFamily, UniformFamily
 from flownav.flows.synthetic import synthetic_wake
 from flownav.paths import REPO_ROOT
 
@@ -168,6 +168,33 @@ def test_a_wake_on_a_current_is_a_wake_scene_and_currents_alone_are_the_current_
     full = env.state.swim_scale == 1
     assert 0 < full.sum() < 64 and torch.equal(flags, torch.where(full, 5.0, 0.0))
     assert scene_flags(SumFamily([UniformFamily(), UniformFamily()]), FamilyTask(WAKE_BOUNDS), n=64)[1].eq(6).all()
+
+
+def test_a_full_speed_swimmer_in_a_random_flow_or_one_on_a_current_is_the_free_scene():
+    turned = TransformedFamily([synthetic_wake()], angle_deg=(10, 80), strength=(1, 1), background=(0, 0))
+    on_current = SumFamily([FourierFamily(), UniformFamily()])
+    flow = MixtureFamily([FourierFamily(), on_current, turned, UniformFamily()], [1.0, 1.0, 1.0, 1.0], WAKE_BOUNDS)
+    env, flags = scene_flags(flow, FamilyTask(WAKE_BOUNDS, full_speed_share=0.5), n=1024)
+    member, full = env.flow.params["member"], env.state.swim_scale == 1
+    free = (member < 2) & full
+    assert 100 < free.sum() < 1024 and torch.equal(flags == 8, free)
+    assert torch.equal(flags == 0, (member < 3) & ~full)  # a weaker swimmer there: none
+    assert torch.equal(flags == 5, (member == 2) & full) and torch.equal(flags == 6, member == 3)
+    assert scene_flags(synthetic_wake(), swim_speed_scale=1.0)[1].ne(8).all()  # not a family: never free
+
+
+def test_free_flows_go_to_the_flow_compensating_expert_when_asked():
+    generalist, expert = Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9)
+    obs = torch.randn(5, 24)
+    obs[:, -1] = torch.tensor([8.0, 0.0, 8.0, 6.0, 5.0])
+    plain = SceneRoutedTeacher(generalist, expert)(obs)
+    assert torch.equal(plain, torch.tensor([[0.1, 0.2, 0.3]]).expand(5, 3))
+    routed = SceneRoutedTeacher(generalist, expert, free_flows="compensating")(obs)
+    assert torch.equal(routed[[0, 2]], FlowCompensating()(obs[[0, 2], :-1]))
+    assert torch.equal(routed[[1, 3, 4]], plain[[1, 3, 4]])
+    assert not torch.equal(routed[[0, 2]], plain[[0, 2]])
+    with pytest.raises(ValueError, match=r"^free_flows is 'all'; choose one of \(None, 'compensating'\)"):
+        SceneRoutedTeacher(generalist, expert, free_flows="all")
 
 
 def test_every_other_wake_episode_goes_to_the_wake_expert_or_else_the_generalist():

@@ -20,7 +20,9 @@ unless ``algo.scene_posed_expert`` is given (a ``geo_priv`` network that imitate
 +experiment=generalist_posed_expert). Only full-speed swimmers are flagged there (a weaker swimmer's wake episode
 keeps flag 0). Episodes in a uniform current or still water of the families (flag 6) go to the flow-compensating
 expert with ``algo.scene_currents=all`` (there it swims the straight, fastest track), only the mostly vertical ones
-(|u_z| > |u_xy|) with ``algo.scene_currents=vertical``, else to the generalist.
+(|u_z| > |u_xy|) with ``algo.scene_currents=vertical``, else to the generalist. Full-speed episodes in the families'
+other flows (flag 8: random flows, streets, their sums) go to the flow-compensating expert with
+``algo.scene_free_flows=compensating`` (there it beats the generalist at full speed), else to the generalist.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from flownav.agents.flow_compensating import FlowCompensating
 from flownav.envs.core import (
     SCENE_AWAY,
     SCENE_CURRENT,
+    SCENE_FREE,
     SCENE_PAPER,
     SCENE_POSED,
     SCENE_REVERSE,
@@ -52,6 +55,7 @@ EXPERT_VIEWS = {
     "scene_posed_expert": GENERALIST_VIEW,
 }
 CURRENT_ROUTES = (None, "all", "vertical")  # algo.scene_currents: which currents the flow-compensating expert labels
+FREE_ROUTES = (None, "compensating")  # algo.scene_free_flows: who labels the families' other flows at full speed
 
 
 class SceneRoutedTeacher(nn.Module):
@@ -60,7 +64,8 @@ class SceneRoutedTeacher(nn.Module):
     SCENE_REVERSE, ``away`` (if given; else ``expert``) for SCENE_AWAY, ``wake`` (if given) for SCENE_WAKE, ``posed``
     (if given; else as SCENE_WAKE) for SCENE_POSED, the
     flow-compensating expert for SCENE_CURRENT if ``currents`` is ``"all"`` (only where the current is mostly
-    vertical if ``"vertical"``), ``generalist`` elsewhere. ``expert`` and
+    vertical if ``"vertical"``), the flow-compensating expert for SCENE_FREE if ``free_flows`` is ``"compensating"``,
+    ``generalist`` elsewhere. ``expert`` and
     ``reverse`` read the first 9 numbers of the view (``geo_priv`` begins with ``geo_sincos``), the others all but
     the code."""
 
@@ -74,13 +79,16 @@ class SceneRoutedTeacher(nn.Module):
         wake: nn.Module | None = None,
         currents: str | None = None,
         posed: nn.Module | None = None,
+        free_flows: str | None = None,
     ):
         super().__init__()
         self.generalist, self.expert, self.reverse, self.away, self.wake = generalist, expert, reverse, away, wake
         self.posed = posed
         if currents not in CURRENT_ROUTES:
             raise ValueError(f"currents is {currents!r}; choose one of {CURRENT_ROUTES}")
-        self.currents = currents
+        if free_flows not in FREE_ROUTES:
+            raise ValueError(f"free_flows is {free_flows!r}; choose one of {FREE_ROUTES}")
+        self.currents, self.free_flows = currents, free_flows
         self.upstream = FlowCompensating(u_max)
         self.expert_size = observation_size(EXPERT_VIEW)
 
@@ -93,6 +101,8 @@ class SceneRoutedTeacher(nn.Module):
                 u = view[:, GEO_PRIV_FLOW]
                 current = current & (u[:, 2:].abs() > u[:, :2].norm(dim=-1, keepdim=True))
             compensating = compensating | current
+        if self.free_flows == "compensating":
+            compensating = compensating | (code == SCENE_FREE)
         out = torch.where(compensating, self.upstream(view), self.generalist(view))
         if self.reverse is not None:
             out = torch.where(code == SCENE_REVERSE, self.reverse(geo), out)
@@ -109,12 +119,16 @@ class SceneRoutedTeacher(nn.Module):
 
 
 def scene_routed(
-    generalist: nn.Module, generalist_view: str, experts: dict, currents: str | None = None
+    generalist: nn.Module,
+    generalist_view: str,
+    experts: dict,
+    currents: str | None = None,
+    free_flows: str | None = None,
 ) -> SceneRoutedTeacher:
     """The routed teacher of a ``geo_priv`` generalist and its experts: ``experts`` maps the config key
     (``algo.scene_expert``, optionally ``algo.scene_reverse_expert``, ``algo.scene_away_expert``,
     ``algo.scene_wake_expert`` and ``algo.scene_posed_expert``) to (checkpoint name, loaded policy);
-    ``currents``: ``algo.scene_currents``."""
+    ``currents``: ``algo.scene_currents``; ``free_flows``: ``algo.scene_free_flows``."""
     if generalist_view != GENERALIST_VIEW:
         raise CheckpointError(
             f"algo.scene_expert routes between a {GENERALIST_VIEW!r} teacher and the paper's; the teacher checkpoint "
@@ -134,4 +148,5 @@ def scene_routed(
         wake=loaded.get("scene_wake_expert"),
         currents=currents,
         posed=loaded.get("scene_posed_expert"),
+        free_flows=free_flows,
     )

@@ -166,11 +166,13 @@ def train(cfg, run_dir) -> dict:
         experts = {
             k: (str(a[k]), load_policy(resolve(str(a[k])), expect_obs=EXPERT_VIEWS[k], device=device)[0]) for k in keys
         }
-        teacher = scene_routed(teacher, teacher_view, experts, currents=a.get("scene_currents"))
+        teacher = scene_routed(
+            teacher, teacher_view, experts, currents=a.get("scene_currents"), free_flows=a.get("scene_free_flows")
+        )
         teacher_view = ROUTED_VIEW
         for k in keys:
             teacher_meta |= {k: str(a[k]), f"{k}_sha256": sha256(resolve(str(a[k])))}
-    elif extra := [k for k in (*EXPERT_VIEWS, "scene_currents") if a.get(k)]:
+    elif extra := [k for k in (*EXPERT_VIEWS, "scene_currents", "scene_free_flows") if a.get(k)]:
         raise ConfigError(f"algo.{extra[0]} needs algo.scene_expert: it is one expert of the scene-routed teacher")
     flow = build_flow(cfg.flow, device=device)
     task = build_task(cfg.task, flow)

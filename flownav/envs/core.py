@@ -455,7 +455,7 @@ def sensed_state(seen: State, state: Swimmers, settings: Settings) -> State:
 UPSTREAM_X = 4.0
 # The codes of paper_scene: which expert of a scene-routed teacher labels a swimmer (flownav/agents/scene_router.py).
 SCENE_NONE, SCENE_PAPER, SCENE_UPSTREAM, SCENE_REVERSE, SCENE_AWAY, SCENE_WAKE, SCENE_CURRENT = 0, 1, 2, 3, 4, 5, 6
-SCENE_POSED = 7
+SCENE_POSED, SCENE_FREE = 7, 8
 
 
 def paper_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tensor | None = None) -> Tensor:
@@ -467,24 +467,27 @@ def paper_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tenso
     Region 1 (the crossing the other way, paper SI 2); SCENE_POSED: any other task of a full-speed swimmer in a
     family slot whose flow is the wake as posed; SCENE_WAKE: any other episode of a full-speed swimmer in a family
     slot whose flow is a CFD wake (turned, scaled or on a current);
-    SCENE_CURRENT: an episode in a family slot whose flow is a uniform current or still water; else SCENE_NONE.
+    SCENE_CURRENT: an episode in a family slot whose flow is a uniform current or still water; SCENE_FREE: an
+    episode of a full-speed swimmer in any other family slot (a random flow, a street, a sum); else SCENE_NONE.
     What the simulator knows and a scene-routed teacher reads."""
     slots = torch.arange(state.pos.shape[0], device=state.pos.device) if idx is None else idx
     start, target = state.start[slots], state.target[slots]
     if isinstance(flow, FlowFamily):
         posed, wake, current = flow.wake_as_posed(slots), flow.holds_obstacle(slots), flow.holds_uniform(slots)
+        free = ~(wake | current)
     else:  # a misaligned scene is a RotatedFlow, not the dataset's GridFlow
         posed = torch.full_like(slots, isinstance(flow, GridFlow) and bool(flow.obstacles), dtype=torch.bool)
-        wake = current = torch.zeros_like(posed)
+        wake = current = free = torch.zeros_like(posed)
     if settings.flow_strength is not None:
         posed = posed & (state.strength[slots] == 1)
     full = state.swim_scale[slots] == 1
-    posed, wake = posed & full, wake & full
+    posed, wake, free = posed & full, wake & full, free & full
     forward = posed & REGION_2.contains(target)
     reverse = posed & REGION_1.contains(target) & REGION_2.contains(start)
     code = torch.where(REGION_1.contains(start), SCENE_PAPER, SCENE_AWAY)
     code = torch.where(start[:, 0] < UPSTREAM_X, SCENE_UPSTREAM, code)
-    other = torch.where(wake, SCENE_WAKE, torch.where(current, SCENE_CURRENT, SCENE_NONE))
+    other = torch.where(free, SCENE_FREE, SCENE_NONE)
+    other = torch.where(wake, SCENE_WAKE, torch.where(current, SCENE_CURRENT, other))
     other = torch.where(posed & wake, SCENE_POSED, other)
     code = torch.where(forward, code, other)
     return torch.where(reverse, SCENE_REVERSE, code)

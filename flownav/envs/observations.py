@@ -33,7 +33,8 @@
   paper's training task as posed (the unturned CFD wake at strength 1, full swim speed, the target in Region
   2), 2 there when its episode started upstream of the paper's regions, 4 from any other start, 3 from Region 2
   to a target in Region 1, 7 with any other task there (a family slot), 5 in any other full-speed episode in a
-  CFD wake of the families, 6 in their uniform currents and still water, else 0
+  CFD wake of the families, 6 in their uniform currents and still water, 8 in any other full-speed episode of
+  the families (random flows, streets, their sums), else 0
   (``flownav.envs.core.paper_scene``): what a teacher needs to hand those episodes to their experts
   (``SceneRoutedTeacher``).
 * ``geo_priv_critic`` (27, its asymmetric critic): ``geo_priv`` plus the fraction of the episode's time
