@@ -184,6 +184,9 @@ def test_a_reverse_expert_without_the_scene_expert_is_refused(teacher_ckpt, tmp_
     cfg = make_cfg(teacher_ckpt, "algo.iterations=1", "algo.scene_currents=all")
     with pytest.raises(ConfigError, match=r"^algo.scene_currents needs algo.scene_expert"):
         train.run(cfg, tmp_path / "run")
+    cfg = make_cfg(teacher_ckpt, "algo.iterations=1", "algo.scene_free_flows=compensating")
+    with pytest.raises(ConfigError, match=r"^algo.scene_free_flows needs algo.scene_expert"):
+        train.run(cfg, tmp_path / "run")
 
 
 def test_beta_one_executes_the_teacher(teacher_ckpt):
