@@ -12,16 +12,17 @@ expert of that crossing when one is given (``algo.scene_reverse_expert``, e.g. t
 ``checkpoints/teacher_symmetric.pt``), else to the generalist. Episodes of the paper's target from any other start
 (flag 4: the rest of the extended domain, ``posed_wake_any_start_box`` beyond x = 4) go to
 ``algo.scene_away_expert`` when one is given (a ``geo_priv`` checkpoint, e.g. a network that imitates the oracle
-there: +experiment=generalist_away_expert), else to the paper's teacher. Every other episode in a CFD wake of the
-families (flag 5: turned, scaled or on a current) goes to ``algo.scene_wake_expert`` when one is given (a
-``geo_priv`` checkpoint, e.g. a network that imitates the oracle over the wake family:
+there: +experiment=generalist_away_expert), else to the paper's teacher. Every other episode in a flow of the
+families with an obstacle (flag 5: a CFD wake or a vortex street, turned, scaled or on a current) goes to
+``algo.scene_wake_expert`` when one is given (a ``geo_priv`` checkpoint, e.g. a network that imitates the oracle
+over the wake family:
 +experiment=generalist_wake_expert), else to the generalist; so does any other task in the wake as posed (flag 7)
 unless ``algo.scene_posed_expert`` is given (a ``geo_priv`` network that imitates the oracle there:
 +experiment=generalist_posed_expert). Only full-speed swimmers are flagged there (a weaker swimmer's wake episode
 keeps flag 0). Episodes in a uniform current or still water of the families (flag 6) go to the flow-compensating
 expert with ``algo.scene_currents=all`` (there it swims the straight, fastest track), only the mostly vertical ones
 (|u_z| > |u_xy|) with ``algo.scene_currents=vertical``, else to the generalist. Full-speed episodes in the families'
-other flows (flag 8: random flows, streets, their sums) go to the flow-compensating expert with
+other flows (flag 8: random flows, and those on a current) go to the flow-compensating expert with
 ``algo.scene_free_flows=compensating`` (there it beats the generalist at full speed), else to the generalist.
 """
 

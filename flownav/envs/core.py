@@ -466,9 +466,9 @@ def paper_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tenso
     target from any other start (the rest of the extended domain); SCENE_REVERSE: from Region 2 to a target in
     Region 1 (the crossing the other way, paper SI 2); SCENE_POSED: any other task of a full-speed swimmer in a
     family slot whose flow is the wake as posed; SCENE_WAKE: any other episode of a full-speed swimmer in a family
-    slot whose flow is a CFD wake (turned, scaled or on a current);
+    slot whose flow holds an obstacle (a CFD wake or a vortex street; turned, scaled or on a current);
     SCENE_CURRENT: an episode in a family slot whose flow is a uniform current or still water; SCENE_FREE: an
-    episode of a full-speed swimmer in any other family slot (a random flow, a street, a sum); else SCENE_NONE.
+    episode of a full-speed swimmer in any other family slot (a random flow, one on a current); else SCENE_NONE.
     What the simulator knows and a scene-routed teacher reads."""
     slots = torch.arange(state.pos.shape[0], device=state.pos.device) if idx is None else idx
     start, target = state.start[slots], state.target[slots]
