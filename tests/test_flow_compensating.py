@@ -2,9 +2,11 @@
 
 import math
 
+import pytest
 import torch
 
 from flownav.agents.flow_compensating import FlowCompensating
+from flownav.agents.prior import head_to_target
 from flownav.envs import NavigationEnv
 from flownav.envs.core import Status
 from flownav.envs.tasks import RegionTask
@@ -50,3 +52,24 @@ def test_across_a_current_its_straight_track_is_faster_than_head_to_target():
     assert arrived[0].all() and arrived[1].float().mean() >= 0.99
     # measured: 20.4 against 31.7 time units on average
     assert compensating.time[arrived[0]].mean() < 0.75 * straight.time[arrived[1]].mean()
+
+
+def test_the_cap_keeps_half_the_speed_towards_the_target_and_its_ends_are_the_two_experts():
+    # target along +x, cross flow 2.0 along +y, swim speed 1: uncapped it swims straight against the cross flow
+    # (-y); with min_progress 0.5 along (0.5, -sqrt(0.75)), 60 degrees off the target
+    capped = FlowCompensating(min_progress=0.5)
+    _, dtheta, _ = capped(geo_priv([5.0, 0.0, 0.0], [0.0, 2.0, 0.0], -math.pi / 3))[0]
+    assert abs(dtheta) < 1e-5
+    # below the cap (cross flow 0.6 < sqrt(0.75)) it is the uncapped expert, bit for bit
+    obs = geo_priv([5.0, 0.0, 0.0], [0.3, 0.6, 0.0], 0.4)
+    assert torch.equal(capped(obs), FlowCompensating()(obs))
+    # on random rows: min_progress 0 is the expert as it was, min_progress 1 is head-to-target
+    g = torch.Generator().manual_seed(0)
+    rows = torch.randn(256, 23, generator=g)
+    rows[:, 6:8] = rows[:, 6:8] / rows[:, 6:8].norm(dim=-1, keepdim=True)  # cos, sin of the heading
+    rows[:, 8], rows[:, 21] = 0.0, torch.rand(256, generator=g)  # psi 0; swim speeds in (0, 1)
+    assert torch.equal(FlowCompensating(min_progress=0.0)(rows), FlowCompensating()(rows))
+    straight = head_to_target(rows[:, :3], torch.atan2(rows[:, 7], rows[:, 6]), rows[:, 8])
+    assert torch.allclose(FlowCompensating(min_progress=1.0)(rows), straight, atol=1e-5)
+    with pytest.raises(ValueError, match=r"^min_progress is 1.5; choose a fraction of the swim speed in \[0, 1\]$"):
+        FlowCompensating(min_progress=1.5)

@@ -6,7 +6,7 @@ from omegaconf import OmegaConf
 
 from flownav.agents.flow_compensating import FlowCompensating
 from flownav.agents.networks import DeterministicPolicy
-from flownav.agents.scene_router import SceneRoutedTeacher, scene_routed
+from flownav.agents.scene_router import CAPPED_MIN_PROGRESS, SceneRoutedTeacher, scene_routed
 from flownav.builders import build_task
 from flownav.envs import NavigationEnv
 from flownav.envs.core import UPSTREAM_X
@@ -197,7 +197,10 @@ def test_free_flows_go_to_the_flow_compensating_expert_when_asked():
     assert torch.equal(routed[[0, 2]], FlowCompensating()(obs[[0, 2], :-1]))
     assert torch.equal(routed[[1, 3, 4]], plain[[1, 3, 4]])
     assert not torch.equal(routed[[0, 2]], plain[[0, 2]])
-    with pytest.raises(ValueError, match=r"^free_flows is 'all'; choose one of \(None, 'compensating'\)"):
+    capped = SceneRoutedTeacher(generalist, expert, free_flows="capped")(obs)
+    assert torch.equal(capped[[0, 2]], FlowCompensating(min_progress=CAPPED_MIN_PROGRESS)(obs[[0, 2], :-1]))
+    assert torch.equal(capped[[1, 3, 4]], plain[[1, 3, 4]])
+    with pytest.raises(ValueError, match=r"^free_flows is 'all'; choose one of \(None, 'compensating', 'capped'\)"):
         SceneRoutedTeacher(generalist, expert, free_flows="all")
 
 

@@ -23,7 +23,8 @@ keeps flag 0). Episodes in a uniform current or still water of the families (fla
 expert with ``algo.scene_currents=all`` (there it swims the straight, fastest track), only the mostly vertical ones
 (|u_z| > |u_xy|) with ``algo.scene_currents=vertical``, else to the generalist. Full-speed episodes in the families'
 other flows (flag 8: random flows, and those on a current) go to the flow-compensating expert with
-``algo.scene_free_flows=compensating`` (there it beats the generalist at full speed), else to the generalist.
+``algo.scene_free_flows=compensating`` (there it beats the generalist at full speed), or the same expert with its
+fight against the cross flow capped with ``capped``, else to the generalist.
 """
 
 from __future__ import annotations
@@ -56,7 +57,10 @@ EXPERT_VIEWS = {
     "scene_posed_expert": GENERALIST_VIEW,
 }
 CURRENT_ROUTES = (None, "all", "vertical")  # algo.scene_currents: which currents the flow-compensating expert labels
-FREE_ROUTES = (None, "compensating")  # algo.scene_free_flows: who labels the families' other flows at full speed
+FREE_ROUTES = (None, "compensating", "capped")  # algo.scene_free_flows: who labels the families' other flows
+# The capped expert's least share of its speed towards the target: of 0.3 / 0.5 / 0.7 the one at or above both
+# head-to-target and the uncapped expert in every regime of the families (python scripts/compensation_cap.py).
+CAPPED_MIN_PROGRESS = 0.5
 
 
 class SceneRoutedTeacher(nn.Module):
@@ -65,7 +69,8 @@ class SceneRoutedTeacher(nn.Module):
     SCENE_REVERSE, ``away`` (if given; else ``expert``) for SCENE_AWAY, ``wake`` (if given) for SCENE_WAKE, ``posed``
     (if given; else as SCENE_WAKE) for SCENE_POSED, the
     flow-compensating expert for SCENE_CURRENT if ``currents`` is ``"all"`` (only where the current is mostly
-    vertical if ``"vertical"``), the flow-compensating expert for SCENE_FREE if ``free_flows`` is ``"compensating"``,
+    vertical if ``"vertical"``), the flow-compensating expert for SCENE_FREE if ``free_flows`` is ``"compensating"``
+    (capped at :data:`CAPPED_MIN_PROGRESS` if ``"capped"``),
     ``generalist`` elsewhere. ``expert`` and
     ``reverse`` read the first 9 numbers of the view (``geo_priv`` begins with ``geo_sincos``), the others all but
     the code."""
@@ -91,6 +96,7 @@ class SceneRoutedTeacher(nn.Module):
             raise ValueError(f"free_flows is {free_flows!r}; choose one of {FREE_ROUTES}")
         self.currents, self.free_flows = currents, free_flows
         self.upstream = FlowCompensating(u_max)
+        self.capped = FlowCompensating(u_max, min_progress=CAPPED_MIN_PROGRESS)
         self.expert_size = observation_size(EXPERT_VIEW)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
@@ -105,6 +111,8 @@ class SceneRoutedTeacher(nn.Module):
         if self.free_flows == "compensating":
             compensating = compensating | (code == SCENE_FREE)
         out = torch.where(compensating, self.upstream(view), self.generalist(view))
+        if self.free_flows == "capped":
+            out = torch.where(code == SCENE_FREE, self.capped(view), out)
         if self.reverse is not None:
             out = torch.where(code == SCENE_REVERSE, self.reverse(geo), out)
         if self.wake is not None:
