@@ -63,7 +63,7 @@ def test_the_cap_keeps_half_the_speed_towards_the_target_and_its_ends_are_the_tw
     # below the cap (cross flow 0.6 < sqrt(0.75)) it is the uncapped expert, bit for bit
     obs = geo_priv([5.0, 0.0, 0.0], [0.3, 0.6, 0.0], 0.4)
     assert torch.equal(capped(obs), FlowCompensating()(obs))
-    # on random rows: min_progress 0 is the expert as it was, min_progress 1 is head-to-target
+    # on random rows: min_progress 0 is the uncapped expert, min_progress 1 is head-to-target
     g = torch.Generator().manual_seed(0)
     rows = torch.randn(256, 23, generator=g)
     rows[:, 6:8] = rows[:, 6:8] / rows[:, 6:8].norm(dim=-1, keepdim=True)  # cos, sin of the heading

@@ -58,8 +58,9 @@ EXPERT_VIEWS = {
 }
 CURRENT_ROUTES = (None, "all", "vertical")  # algo.scene_currents: which currents the flow-compensating expert labels
 FREE_ROUTES = (None, "compensating", "capped")  # algo.scene_free_flows: who labels the families' other flows
-# The capped expert's least share of its speed towards the target: of 0.3 / 0.5 / 0.7 the one at or above both
-# head-to-target and the uncapped expert in every regime of the families (python scripts/compensation_cap.py).
+# The capped expert's least share of its speed towards the target: of 0.3 / 0.5 / 0.7, 0.3 and 0.5 are at or above
+# both head-to-target and the uncapped expert in every regime of the families, 0.5 ahead in four of six
+# (python scripts/compensation_cap.py).
 CAPPED_MIN_PROGRESS = 0.5
 
 
