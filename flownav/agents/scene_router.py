@@ -57,11 +57,14 @@ EXPERT_VIEWS = {
     "scene_posed_expert": GENERALIST_VIEW,
 }
 CURRENT_ROUTES = (None, "all", "vertical")  # algo.scene_currents: which currents the flow-compensating expert labels
-FREE_ROUTES = (None, "compensating", "capped")  # algo.scene_free_flows: who labels the families' other flows
 # The capped expert's least share of its speed towards the target: of 0.3 / 0.5 / 0.7, 0.3 and 0.5 are at or above
 # both head-to-target and the uncapped expert in every regime of the families, 0.5 ahead in four of six
 # (python scripts/compensation_cap.py).
 CAPPED_MIN_PROGRESS = 0.5
+# algo.scene_free_flows: the flow-compensating expert that labels the families' other flows at full speed, by its
+# min_progress (None: the generalist labels them)
+FREE_MIN_PROGRESS = {"compensating": 0.0, "capped": CAPPED_MIN_PROGRESS}
+FREE_ROUTES = (None, *FREE_MIN_PROGRESS)
 
 
 class SceneRoutedTeacher(nn.Module):
@@ -95,9 +98,9 @@ class SceneRoutedTeacher(nn.Module):
             raise ValueError(f"currents is {currents!r}; choose one of {CURRENT_ROUTES}")
         if free_flows not in FREE_ROUTES:
             raise ValueError(f"free_flows is {free_flows!r}; choose one of {FREE_ROUTES}")
-        self.currents, self.free_flows = currents, free_flows
+        self.currents = currents
         self.upstream = FlowCompensating(u_max)
-        self.capped = FlowCompensating(u_max, min_progress=CAPPED_MIN_PROGRESS)
+        self.free = None if free_flows is None else FlowCompensating(u_max, min_progress=FREE_MIN_PROGRESS[free_flows])
         self.expert_size = observation_size(EXPERT_VIEW)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
@@ -109,11 +112,9 @@ class SceneRoutedTeacher(nn.Module):
                 u = view[:, GEO_PRIV_FLOW]
                 current = current & (u[:, 2:].abs() > u[:, :2].norm(dim=-1, keepdim=True))
             compensating = compensating | current
-        if self.free_flows == "compensating":
-            compensating = compensating | (code == SCENE_FREE)
         out = torch.where(compensating, self.upstream(view), self.generalist(view))
-        if self.free_flows == "capped":
-            out = torch.where(code == SCENE_FREE, self.capped(view), out)
+        if self.free is not None:
+            out = torch.where(code == SCENE_FREE, self.free(view), out)
         if self.reverse is not None:
             out = torch.where(code == SCENE_REVERSE, self.reverse(geo), out)
         if self.wake is not None:
