@@ -15,7 +15,7 @@ from flownav.envs.reward import RewardConfig
 from flownav.envs.tasks import DistanceTask, FamilyTask, FixedTargetTask, RegionTask, SymmetricTask
 from flownav.errors import ConfigError
 from flownav.flows.analytic import ABCFlow, UniformFlow
-from flownav.flows.base import WAKE_BOUNDS, Box, FlowField, make_periodic
+from flownav.flows.base import AXES, WAKE_BOUNDS, Box, FlowField, make_periodic
 from flownav.flows.families import (
     FlowFamily,
     FourierFamily,
@@ -43,13 +43,17 @@ def _scale_pi(value):
     return [[float(x) * math.pi for x in corner] for corner in value]
 
 
-def _family_member(cfg: Mapping, key: str, bounds: Box, device) -> FlowFamily:
-    """One member of a flow family (flownav/flows/families.py): its type and its constructor's arguments."""
+def _family_member(cfg: Mapping, key: str, bounds: Box, device, periodic: tuple[int, ...] = ()) -> FlowFamily:
+    """One member of a flow family (flownav/flows/families.py): its type and its constructor's arguments;
+    ``periodic``: the family's periodic axes, on which random Fourier modes take whole periods of the box."""
     args = {k: v for k, v in cfg.items() if k not in ("type", "weight")}
     kind = cfg.get("type")
     if kind == "sum":
         parts = args.get("members") or {}
-        return SumFamily([_family_member(m, f"{key}.members.{n}", bounds, device) for n, m in parts.items()], bounds)
+        members = [_family_member(m, f"{key}.members.{n}", bounds, device, periodic) for n, m in parts.items()]
+        return SumFamily(members, bounds)
+    if kind == "fourier" and periodic:
+        args["periodic_axes"] = periodic
 
     def wake(path=None, **kw):
         return wake_family(load_grid_flow(resolve(path or DEFAULT_FLOW_DATASET), device=device), **kw)
@@ -108,7 +112,10 @@ def build_flow(cfg: Mapping, device="cpu") -> FlowField:
         members = cfg.get("members") or {}
         if not members:
             raise ConfigError("flow.members must name at least one member, e.g. {fourier: {type: fourier, weight: 1}}")
-        built = {name: _family_member(m, f"flow.members.{name}", bounds, device) for name, m in members.items()}
+        periodic = tuple(AXES.index(a) for a in cfg.get("periodic_axes") or () if a in AXES)
+        built = {
+            name: _family_member(m, f"flow.members.{name}", bounds, device, periodic) for name, m in members.items()
+        }
         if len(built) == 1:
             return next(iter(built.values()))
         weights = [float(members[name].get("weight", 1.0)) for name in built]

@@ -312,6 +312,38 @@ def test_family_configs_build_and_bad_members_fail_with_the_key():
         NavigationEnv(FourierFamily(), num_envs=2, views=("geo",), misalignment_deg=30)
 
 
+def test_a_periodic_fourier_family_is_periodic_per_swimmer_and_divergence_free():
+    flow = build_flow(OmegaConf.load("conf/flow/family_fourier_periodic.yaml"))
+    assert flow.periodic_axes == (1, 2)
+    n = 64
+    drawn(flow, n, seed=3)
+    k = flow.params["k"]
+    assert torch.allclose(k[..., 1:], k[..., 1:].round(), atol=1e-5)  # the box is 2 pi wide in y and z
+    assert not torch.allclose(k[..., 0], k[..., 0].round(), atol=1e-3)  # x is bounded: continuous
+    gen = torch.Generator().manual_seed(0)
+    pos, t = torch.rand(n, 3, generator=gen) * 6 - 3, torch.rand(n, generator=gen) * 40
+    u = flow.velocity(pos, t)
+    for shift in ([0.0, 2 * math.pi, 0.0], [0.0, 0.0, -2 * math.pi], [0.0, 4 * math.pi, 2 * math.pi]):
+        assert torch.allclose(flow.velocity(pos + torch.tensor(shift), t), u, atol=1e-4)
+    assert not torch.allclose(flow.velocity(pos + torch.tensor([2 * math.pi, 0.0, 0.0]), t), u, atol=1e-2)
+    flow.params = {key: v.double() for key, v in flow.params.items()}
+    div, u = divergence(flow, pos.double(), t.double())
+    assert u.abs().max() > 0.1 and div.abs().max() < 1e-5
+    # The draw off the lattice is unchanged: a family without periodic axes draws what it always drew.
+    free, lattice = drawn(FourierFamily(), 8, seed=1), drawn(FourierFamily(periodic_axes=(1, 2)), 8, seed=1)
+    assert torch.equal(free.params["k"][..., 0], lattice.params["k"][..., 0])
+    assert torch.equal(free.params["phase"], lattice.params["phase"])
+
+
+def test_a_periodic_family_refuses_a_member_that_is_not_periodic():
+    cfg = OmegaConf.load("conf/flow/family_fourier_periodic.yaml")
+    cfg.members = {"current": {"type": "uniform", "speed": [0.0, 1.0]}, "street": {"type": "vortex_street"}}
+    with pytest.raises(ConfigError, match="flow.periodic_axes: the flow is not periodic over its box on axis y"):
+        build_flow(cfg)
+    cfg.members = {"current": {"type": "uniform", "speed": [0.0, 1.0]}}  # any box is a period of a uniform flow
+    assert build_flow(cfg).periodic_axes == (1, 2)
+
+
 def test_a_generalist_student_imitates_a_privileged_teacher(tmp_path):
     """DAgger takes the teacher's privileged view from its checkpoint and reads it from the same env."""
     from hydra import compose, initialize_config_dir

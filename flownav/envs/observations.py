@@ -16,7 +16,7 @@
 * ``ego_mem_speed`` (9 + 3 K, ours): ``ego_mem`` plus the swimmer's own full swim speed U (the action's full
   speed times its speed factor): what a robot knows of its own propulsion. Where the families draw weak swimmers
   the same flow calls for another action at another U, and without it an ego student cannot tell which. (The
-  generalist recipe with it was no better: docs/generalist.md.)
+  generalist recipe with it was no better: docs/generalist_variants.md.)
 * ``geo_sincos`` (9, ours): ``geo`` with theta as (cos theta, sin theta). theta wraps at +-pi, which is
   heading straight upstream, the very heading of the wake crossing; the angle jumps there and the
   pair does not. Same information as ``geo``. ``geo_flow_sincos``: the same for ``geo_flow`` (SI 1).

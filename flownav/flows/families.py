@@ -18,6 +18,9 @@ Members (parameter ranges are the constructor's arguments; ``conf/flow/family_*.
   spectrum A_k ~ |k|^-p (``spectrum`` = p), phases phi_k are uniform in [0, 2 pi), frequencies w_k
   uniform in +-``frequency``. The amplitudes are scaled so that the space-time RMS speed
   sqrt(sum A_k^2) equals a speed V drawn uniformly in ``speed`` (the pointwise maximum is at most sqrt(K) V).
+  With ``periodic_axes`` (the flow config's, e.g. [y, z]) each k's component on those axes is rounded to the
+  nearest multiple of 2 pi / L (L: the box's size there), so the flow is periodic over the box on them; a and b
+  are drawn orthogonal to the rounded k and the amplitude keeps the drawn |k|'s spectrum.
 * :class:`UniformFamily`, uniform currents u = s e, e uniform on the sphere (``horizontal``: in the x-y
   plane; a share ``vertical_share`` of the draws along +z or -z instead), s uniform in ``speed``; a share
   ``still_share`` of the draws is still water (s = 0 exactly).
@@ -176,10 +179,14 @@ class FourierFamily(FlowFamily):
         speed: Sequence[float] = (0.2, 1.2),
         frequency: float = 0.5,
         bounds: Box = WAKE_BOUNDS,
+        periodic_axes: Sequence[int] = (),
     ):
         super().__init__(bounds)
         if int(modes) < 1 or not frequency >= 0:
             raise ValueError(f"a Fourier family needs modes >= 1 and frequency >= 0, got {modes}, {frequency}")
+        self.periodic_axes = tuple(int(a) for a in periodic_axes)
+        # The lattice step of each wave-vector component: 2 pi / L on a periodic axis, 0 (continuous) elsewhere.
+        self.k_step = [2 * math.pi / bounds.size[a] if a in self.periodic_axes else 0.0 for a in range(3)]
         self.modes, self.spectrum, self.frequency = int(modes), float(spectrum), float(frequency)
         self.wavelength = _check_range(wavelength, "wavelength", low=1e-6)
         self.speed = _check_range(speed, "speed")
@@ -191,6 +198,12 @@ class FourierFamily(FlowFamily):
         lam = torch.exp(_uniform(n, log_lo, log_hi, generator, device, K))
         kmag = 2 * math.pi / lam
         khat = _unit_vectors(n, generator, device, K)
+        k = khat * kmag[..., None]
+        if self.periodic_axes:
+            step = k.new_tensor(self.k_step)
+            k = torch.where(step > 0, torch.round(k / step.clamp_min(1e-12)) * step, k)
+            size = k.norm(dim=-1, keepdim=True)
+            khat = torch.where(size > 0, k / size.clamp_min(1e-12), khat)  # a k rounded to 0: a uniform mode
         a = _unit_vectors(n, generator, device, K)
         a = a - (a * khat).sum(-1, keepdim=True) * khat  # project out k: k.a = 0
         a = a / a.norm(dim=-1, keepdim=True).clamp_min(1e-12)
@@ -198,7 +211,7 @@ class FourierFamily(FlowFamily):
         speed = _uniform(n, *self.speed, generator, device)
         amp = amp * (speed / amp.norm(dim=-1))[:, None]  # RMS speed sqrt(sum A_k^2) = speed
         return {
-            "k": khat * kmag[..., None],
+            "k": k,
             "a": a * amp[..., None],
             "b": torch.linalg.cross(khat, a) * amp[..., None],
             "phase": _uniform(n, 0.0, 2 * math.pi, generator, device, K),
