@@ -272,6 +272,38 @@ def test_privileged_views_on_a_linear_flow():
     assert torch.allclose(critic[:, 24:], td["target"] @ M.T + c, atol=1e-5)
 
 
+def test_the_view_around_reads_the_flow_at_its_probe_points():
+    """geo_priv_around = geo_priv and the flow at AROUND_OFFSETS from the swimmer: exact on a linear flow, and in a
+    family each swimmer's own flow at its own points (after steps and a partial reset)."""
+    from flownav.envs.observations import AROUND_OFFSETS
+
+    M = torch.tensor([[0.1, -0.2, 0.05], [0.3, 0.0, -0.1], [0.02, 0.04, -0.1]])
+    c = torch.tensor([0.4, -0.1, 0.2])
+    flow = FunctionFlow(lambda p, t: p @ M.T + c, WAKE_BOUNDS, 2.0)
+    env = NavigationEnv(flow, num_envs=8, views=("geo_priv_around", "geo_priv"), time_limit=10.0, seed=0)
+    td = env.reset()
+    td["action"] = env.action_spec.rand()
+    td = env.step(td)["next"]
+    around, offsets = td["geo_priv_around"], torch.tensor(AROUND_OFFSETS)
+    assert around.shape[-1] == observation_size("geo_priv_around") == 23 + 36 and len(AROUND_OFFSETS) == 12
+    assert torch.equal(around[:, :23], td["geo_priv"])
+    expected = (td["position"][:, None] + offsets) @ M.T + c  # [8, 12, 3]
+    assert torch.allclose(around[:, 23:].view(8, 12, 3), expected, atol=1e-5)
+    assert offsets.abs().sum(-1).tolist() == [1.0] * 6 + [2.0] * 6
+    env = NavigationEnv(FourierFamily(), num_envs=4, views=("geo_priv_around",), time_limit=10.0, seed=0)
+    td = env.reset()
+    for _ in range(2):
+        td["action"] = env.action_spec.rand()
+        td = env.step(td)["next"]
+    td = env.reset(td.clone().set("_reset", torch.tensor([0, 1, 0, 0], dtype=torch.bool)[:, None]))
+    s = env.state
+    for slot in range(4):
+        points = s.pos[slot] + offsets
+        idx, t = torch.full((12,), slot), (s.t0[slot] + s.time[slot]).expand(12)
+        got = td["geo_priv_around"][slot, 23:].view(12, 3)
+        assert torch.allclose(got, env.flow.velocity(points, t, idx), atol=1e-6)
+
+
 def test_privileged_look_up_in_a_family_after_steps_and_a_partial_reset():
     """The flow, its gradient (forward differences of GRADIENT_STEP) and the flow at the target that the privileged
     views read come from one look-up of 5 points per swimmer: the same numbers as separate look-ups of each slot's

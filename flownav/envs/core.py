@@ -28,11 +28,13 @@ from torch import Tensor
 
 from flownav.envs.kinematics import body_frame, heading_vector, move, step_reaches, turn, wrap_angle
 from flownav.envs.observations import (
+    AROUND_OFFSETS,
     HISTORY_LEN,
     HISTORY_STRIDE,
     SENSED_VIEWS,
     State,
     compute_views,
+    needs_around,
     needs_body_frame,
     needs_gradient,
     needs_history,
@@ -409,6 +411,17 @@ def sense_flow(
     return u[0], {"flow_grad": grad} | ({"target_flow": u[4]} if target_flow else {})
 
 
+def flow_around(state: Swimmers, flow: FlowField, settings: Settings) -> Tensor:
+    """The flow now at :data:`AROUND_OFFSETS` from every swimmer, ``[B, P, 3]`` (``geo_priv_around``): a look-up
+    at observation time, so the state carries nothing more."""
+    offsets = state.pos.new_tensor(AROUND_OFFSETS)
+    n, p = state.pos.shape[0], offsets.shape[0]
+    points = (state.pos[:, None] + offsets).reshape(-1, 3)
+    slots = torch.arange(n, device=state.pos.device).repeat_interleave(p)
+    t = (state.t0 + state.time).repeat_interleave(p)
+    return flow_at(flow, settings, state.strength, points, t, slots).view(n, p, 3)
+
+
 def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, Tensor]:
     """The observation views of ``settings.views``, ``{name: [B, size]}`` (flownav.envs.observations)."""
     views = settings.views
@@ -421,6 +434,8 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
         }
     if needs_scene(views):
         privileged["paper_scene"] = state.scene.to(state.pos.dtype)
+    if needs_around(views):
+        privileged["flow_around"] = flow_around(state, flow, settings)
     seen = State(
         to_target=flow.displacement(state.pos, state.target),
         velocity=state.vel,

@@ -29,6 +29,9 @@
   more points in the same look-up), the swim speed U (the action's full speed times the swimmer's speed factor) and
   log(U / (|u| + 0.05)), the swim-speed ratio against the local flow. A teacher that knows how the
   flow varies around it and how strong it is against the flow can plan; an ego student imitates it.
+* ``geo_priv_around`` (59): ``geo_priv`` plus the flow velocity at 12 points around the swimmer
+  (:data:`AROUND_OFFSETS`: 1 and 2 units along +-x, +-y, +-z, inertial frame): what the flow does beyond the
+  gradient's reach, for a teacher whose best action depends on where the flow will carry it.
 * ``geo_priv_scene`` (24, a scene-routed teacher's view): ``geo_priv`` plus 1 where the swimmer is in the
   paper's training task as posed (the unturned CFD wake at strength 1, full swim speed, the target in Region
   2), 2 there when its episode started upstream of the paper's regions, 4 from any other start, 3 from Region 2
@@ -69,6 +72,7 @@ class State:
     flow_history: Tensor | None = None  # [N, HISTORY_LEN, 3] past flow velocities, inertial; memory views only
     flow_phase: Tensor | None = None  # [N] flow time / period in [0, 1); None: no period (or not asked for)
     flow_gradient: Tensor | None = None  # [N, 3, 3] du_i / dx_j; privileged views only
+    flow_around: Tensor | None = None  # [N, P, 3] the flow at AROUND_OFFSETS from the swimmer; geo_priv_around
     swim_speed: Tensor | None = None  # [N] the swimmer's full swim speed
     time_left: Tensor | None = None  # [N] fraction of the time limit left; privileged views only
     target_flow: Tensor | None = None  # [N, 3] flow velocity at the target; geo_priv_critic only
@@ -125,6 +129,19 @@ def _geo_priv(s: State) -> Tensor:
     return torch.cat((_geo_sincos(s, s.velocity), *extra), -1)
 
 
+# The probe points of geo_priv_around, relative to the swimmer: +-x, +-y, +-z at 1 and 2 units.
+AROUND_OFFSETS = tuple(
+    tuple(sign * radius * (axis == a) for a in range(3))
+    for radius in (1.0, 2.0)
+    for axis in range(3)
+    for sign in (1, -1)
+)
+
+
+def _geo_priv_around(s: State) -> Tensor:
+    return torch.cat((_geo_priv(s), s.flow_around.flatten(1)), -1)
+
+
 def _geo_priv_scene(s: State) -> Tensor:
     return torch.cat((_geo_priv(s), s.paper_scene[:, None]), -1)
 
@@ -147,14 +164,16 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "geo_priv": (23, _geo_priv),
     "geo_priv_critic": (27, _geo_priv_critic),
     "geo_priv_scene": (24, _geo_priv_scene),
+    "geo_priv_around": (23 + 3 * len(AROUND_OFFSETS), _geo_priv_around),
 }
 MEMORY_VIEWS = ("ego_mem", "ego_mem_speed")
 SENSED_VIEWS = tuple(name for name in VIEWS if name.startswith("ego"))  # on-board sensors: env.sensor_noise
 PHASE_VIEWS = ("privileged",)
-GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic", "geo_priv_scene")  # the flow's gradient and time left
+GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic", "geo_priv_scene", "geo_priv_around")  # the gradient, time left
 SWIM_SPEED_VIEWS = (*GRADIENT_VIEWS, "ego_mem_speed")  # the swimmer's own full swim speed
 TARGET_FLOW_VIEWS = ("geo_priv_critic",)
 SCENE_VIEWS = ("geo_priv_scene",)
+AROUND_VIEWS = ("geo_priv_around",)
 GEO_VIEWS = tuple(name for name in VIEWS if name.startswith("geo"))  # the teacher's kind: inertial frame
 
 
@@ -180,6 +199,10 @@ def needs_swim_speed(names) -> bool:
 
 def needs_target_flow(names) -> bool:
     return any(name in TARGET_FLOW_VIEWS for name in names)
+
+
+def needs_around(names) -> bool:
+    return any(name in AROUND_VIEWS for name in names)
 
 
 def needs_scene(names) -> bool:
