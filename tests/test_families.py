@@ -361,7 +361,7 @@ def test_a_periodic_fourier_family_is_periodic_per_swimmer_and_divergence_free()
     flow.params = {key: v.double() for key, v in flow.params.items()}
     div, u = divergence(flow, pos.double(), t.double())
     assert u.abs().max() > 0.1 and div.abs().max() < 1e-5
-    # The draw off the lattice is unchanged: a family without periodic axes draws what it always drew.
+    # Off the periodic axes the draw is a plain family's: the same k_x and phases from the same seed.
     free, lattice = drawn(FourierFamily(), 8, seed=1), drawn(FourierFamily(periodic_axes=(1, 2)), 8, seed=1)
     assert torch.equal(free.params["k"][..., 0], lattice.params["k"][..., 0])
     assert torch.equal(free.params["phase"], lattice.params["phase"])
