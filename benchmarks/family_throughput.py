@@ -8,8 +8,9 @@ teacher=<run dir> --cost student=<run dir> ...`` writes the training runs' wall 
 
 Every case steps ``NavigationEnv.step_and_maybe_reset`` with random actions (resets included) on the flow
 config ``conf/flow/<name>.yaml`` and the task the generalist trains on (``task=family``; the wake alone:
-the paper's regions), with the teacher's view (``geo_sincos``) and with the generalist teacher's views
-(``geo_priv`` + ``geo_priv_critic``: 4 look-ups per step instead of 1). The machine is shared, so the cases
+the paper's regions; the periodic family: the ABC task it is used with), with the teacher's view (``geo_sincos``),
+with the generalist teacher's views (``geo_priv`` + ``geo_priv_critic``: 4 look-ups per step instead of 1) and with
+the wider ``geo_priv_around`` (12 more points per step). The machine is shared, so the cases
 take turns window by window and each keeps its best window; ratios are against ``cylinder`` with
 ``geo_sincos`` measured in the same rounds.
 """
@@ -31,17 +32,28 @@ from common import env_stepper, machine, write_result  # noqa: E402
 from flownav.builders import build_env, build_flow, build_task  # noqa: E402
 from flownav.paths import REPO_ROOT  # noqa: E402
 
-FLOWS = ("cylinder", "family_current", "family_fourier", "family_wake", "family_vortex_street", "family_mix")
+FLOWS = (
+    "cylinder",
+    "family_current",
+    "family_fourier",
+    "family_wake",
+    "family_vortex_street",
+    "family_mix",
+    "family_fourier_periodic",
+)
+# The task each flow is stepped with: the generalist's family task unless the flow has its own.
+TASKS = {"cylinder": "regions", "family_fourier_periodic": "abc"}
 VIEWS = {
     "teacher view (geo_sincos)": ("geo_sincos",),
     "privileged views (geo_priv + critic)": ("geo_priv", "geo_priv_critic"),
+    "wider privileged view (geo_priv_around + critic)": ("geo_priv_around", "geo_priv_critic"),
 }
 
 
 def make_stepper(flow_name: str, views, batch: int):
     conf = REPO_ROOT / "conf"
     flow = build_flow(OmegaConf.load(conf / "flow" / f"{flow_name}.yaml"))
-    task_name = "regions" if flow_name == "cylinder" else "family"
+    task_name = TASKS.get(flow_name, "family")
     task = build_task(OmegaConf.load(conf / "task" / f"{task_name}.yaml"), flow)
     env = build_env(OmegaConf.load(conf / "env" / "default.yaml"), flow, task, views, num_envs=batch, seed=0)
     return env_stepper(env)

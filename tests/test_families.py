@@ -405,6 +405,8 @@ def test_family_benchmark_code_path_runs():
     bench = load_module("benchmarks/family_throughput.py")
     step = bench.make_stepper("family_fourier", ("geo_priv", "geo_priv_critic"), 8)
     assert bench.window_rate(step, 8, 0.01) > 0
+    step = bench.make_stepper("family_fourier_periodic", ("geo_priv_around", "geo_priv_critic"), 8)  # the ABC task
+    assert bench.window_rate(step, 8, 0.01) > 0
 
 
 def test_a_periodic_evaluation_figure_of_a_family_draws_the_recorded_paths():
