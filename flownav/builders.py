@@ -15,7 +15,7 @@ from flownav.envs.reward import RewardConfig
 from flownav.envs.tasks import DistanceTask, FamilyTask, FixedTargetTask, RegionTask, SymmetricTask
 from flownav.errors import ConfigError
 from flownav.flows.analytic import ABCFlow, UniformFlow
-from flownav.flows.base import AXES, WAKE_BOUNDS, Box, FlowField, make_periodic
+from flownav.flows.base import WAKE_BOUNDS, Box, FlowField, axis_indices, make_periodic
 from flownav.flows.families import (
     FlowFamily,
     FourierFamily,
@@ -112,7 +112,10 @@ def build_flow(cfg: Mapping, device="cpu") -> FlowField:
         members = cfg.get("members") or {}
         if not members:
             raise ConfigError("flow.members must name at least one member, e.g. {fourier: {type: fourier, weight: 1}}")
-        periodic = tuple(AXES.index(a) for a in cfg.get("periodic_axes") or () if a in AXES)
+        try:
+            periodic = axis_indices(cfg.get("periodic_axes") or ())
+        except ValueError as e:
+            raise ConfigError(str(e)) from e
         built = {
             name: _family_member(m, f"flow.members.{name}", bounds, device, periodic) for name, m in members.items()
         }

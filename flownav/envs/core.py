@@ -127,6 +127,7 @@ class Swimmers:
     swim_scale: Tensor  # [B] the factor on the action's speed (settings.swim_speed_scale times the task's draw)
     flow_grad: Tensor  # [B, 3, 3] du_i / dx_j (privileged views)
     target_flow: Tensor  # [B, 3] the flow at the target (privileged critic)
+    flow_around: Tensor  # [B, P, 3] the flow at AROUND_OFFSETS from the swimmer (geo_priv_around)
     scene: Tensor  # [B] int64 the episode's paper-scene code (:func:`paper_scene`; the scene view), set at reset
     sensor_error: Tensor  # [B, 6] standard-normal errors of the last reading: flow (3), to-target (3); zeros if exact
 
@@ -184,6 +185,7 @@ def initial_state(num_envs: int, settings: Settings, device) -> Swimmers:
         swim_scale=torch.full((num_envs,), settings.swim_speed_scale, device=device),
         flow_grad=z(3, 3),
         target_flow=z(3),
+        flow_around=z(len(AROUND_OFFSETS), 3),
         scene=torch.zeros(num_envs, dtype=torch.int64, device=device),
         sensor_error=z(6),
     )
@@ -395,31 +397,26 @@ def sense_flow(
     flow: FlowField, settings: Settings, strength: Tensor, pos: Tensor, t: Tensor, target: Tensor, idx=None
 ) -> tuple[Tensor, dict[str, Tensor]]:
     """The flow velocity the swimmers feel at ``pos`` (all slots, or the slots ``idx``) and, for the privileged
-    views, what only the simulator knows: the flow's gradient by forward differences from it (``flow_grad``) and
-    the flow at ``target`` (``target_flow``); ``{}`` when no view asks. One look-up of 1, 4 or 5 points per
-    swimmer: a family's per-call cost is paid once."""
+    views, what only the simulator knows: the flow's gradient by forward differences from it (``flow_grad``),
+    the flow at ``target`` (``target_flow``) and at :data:`AROUND_OFFSETS` from ``pos`` (``flow_around``); ``{}``
+    when no view asks. One look-up of 1, 4, 5 or 16-17 points per swimmer: a family's per-call cost is paid once."""
     if not needs_gradient(settings.views):
         return flow_at(flow, settings, strength, pos, t, idx), {}
-    target_flow = needs_target_flow(settings.views)
+    target_flow, around = needs_target_flow(settings.views), needs_around(settings.views)
     n = pos.shape[0]
     slots = torch.arange(n, device=pos.device) if idx is None else idx
     shifted = pos[None] + torch.eye(3, device=pos.device)[:, None] * GRADIENT_STEP  # [3 (j), n, 3]: + h e_j
-    points = torch.cat((pos[None], shifted, target[None]) if target_flow else (pos[None], shifted))
+    parts = [pos[None], shifted, target[None]] if target_flow else [pos[None], shifted]
+    if around:
+        parts.append(pos[None] + pos.new_tensor(AROUND_OFFSETS)[:, None])  # [P, n, 3]
+    points = torch.cat(parts)
     rows = points.shape[0]
     u = flow_at(flow, settings, strength, points.reshape(-1, 3), t.repeat(rows), slots.repeat(rows)).view(rows, n, 3)
     grad = ((u[1:4] - u[0]) / GRADIENT_STEP).permute(1, 2, 0)  # [n, i (component), j (d/dx_j)]
-    return u[0], {"flow_grad": grad} | ({"target_flow": u[4]} if target_flow else {})
-
-
-def flow_around(state: Swimmers, flow: FlowField, settings: Settings) -> Tensor:
-    """The flow now at :data:`AROUND_OFFSETS` from every swimmer, ``[B, P, 3]`` (``geo_priv_around``): a look-up
-    at observation time, so the state carries nothing more."""
-    offsets = state.pos.new_tensor(AROUND_OFFSETS)
-    n, p = state.pos.shape[0], offsets.shape[0]
-    points = (state.pos[:, None] + offsets).reshape(-1, 3)
-    slots = torch.arange(n, device=state.pos.device).repeat_interleave(p)
-    t = (state.t0 + state.time).repeat_interleave(p)
-    return flow_at(flow, settings, state.strength, points, t, slots).view(n, p, 3)
+    out = {"flow_grad": grad} | ({"target_flow": u[4]} if target_flow else {})
+    if around:
+        out["flow_around"] = u[rows - len(AROUND_OFFSETS) :].transpose(0, 1)  # [n, P, 3]
+    return u[0], out
 
 
 def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, Tensor]:
@@ -430,12 +427,11 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
         privileged = {
             "flow_gradient": state.flow_grad,
             "target_flow": state.target_flow,
+            "flow_around": state.flow_around,
             "time_left": 1 - state.steps / settings.max_steps,
         }
     if needs_scene(views):
         privileged["paper_scene"] = state.scene.to(state.pos.dtype)
-    if needs_around(views):
-        privileged["flow_around"] = flow_around(state, flow, settings)
     seen = State(
         to_target=flow.displacement(state.pos, state.target),
         velocity=state.vel,

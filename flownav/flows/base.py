@@ -137,17 +137,21 @@ def _periodic_lo_size(flow: FlowField, like: Tensor) -> tuple[Tensor, Tensor]:
     return lo, size
 
 
+def axis_indices(axes) -> tuple[int, ...]:
+    """The sorted indices (0, 1, 2) of ``flow.periodic_axes``' names ("x", "y", "z")."""
+    names = [str(a) for a in axes]
+    if any(a not in AXES for a in names) or len(set(names)) != len(names):
+        raise ValueError(f"flow.periodic_axes must be distinct names among x, y, z; got {names}")
+    return tuple(sorted(AXES.index(a) for a in names))
+
+
 def make_periodic(flow: FlowField, axes, samples: int = 256, tol: float = 1e-4) -> FlowField:
     """Let ``flow``'s domain wrap around on ``axes`` (names "x", "y", "z"); returns the flow.
 
     Refuses a flow whose velocity differs between the two opposite faces of its box on an axis (its box is
     not a whole number of spatial periods there), checked at random points and times.
     """
-    names = [str(a) for a in axes]
-    bad = [a for a in names if a not in AXES]
-    if bad or len(set(names)) != len(names):
-        raise ValueError(f"flow.periodic_axes must be distinct names among x, y, z; got {names}")
-    idx = tuple(sorted(AXES.index(a) for a in names))
+    idx = axis_indices(axes)
     g = torch.Generator().manual_seed(0)
     probe = flow
     if hasattr(flow, "bind"):  # a flow family: check one random draw per sample (each row is its own slot)
