@@ -131,7 +131,7 @@ def build_flow(cfg: Mapping, device="cpu") -> FlowField:
     flow = kinds[cfg["type"]]()
     if cfg.get("periodic_axes"):
         try:
-            make_periodic(flow, list(cfg["periodic_axes"]))
+            make_periodic(flow, list(cfg["periodic_axes"]), device=device)
         except ValueError as e:
             raise ConfigError(str(e)) from e
     scale = float(cfg.get("speed_scale", 1.0))

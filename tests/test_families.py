@@ -374,6 +374,13 @@ def test_a_periodic_family_refuses_a_member_that_is_not_periodic():
         build_flow(cfg)
     cfg.members = {"current": {"type": "uniform", "speed": [0.0, 1.0]}}  # any box is a period of a uniform flow
     assert build_flow(cfg).periodic_axes == (1, 2)
+    # However rarely a mixture draws it, a member that is not periodic is checked and refused; one never drawn is not.
+    fourier = OmegaConf.load("conf/flow/family_fourier_periodic.yaml").members.fourier
+    cfg.members = {"fourier": fourier, "street": {"type": "vortex_street", "weight": 1e-6}}
+    with pytest.raises(ConfigError, match="flow.periodic_axes: the flow is not periodic over its box on axis y"):
+        build_flow(cfg)
+    cfg.members.street.weight = 0.0
+    assert build_flow(cfg).periodic_axes == (1, 2)
 
 
 def test_a_generalist_student_imitates_a_privileged_teacher(tmp_path):

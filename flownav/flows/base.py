@@ -126,6 +126,11 @@ class FlowField:
         """Flows without tensors are device-free; grid flows override this."""
         return self
 
+    def probe(self, samples: int, generator: torch.Generator) -> FlowField:
+        """What a check of the flow's properties evaluates, ``samples`` rows at a time: the flow itself (a family
+        returns a copy of itself with one draw per row)."""
+        return self
+
 
 AXES = "xyz"
 
@@ -145,24 +150,23 @@ def axis_indices(axes) -> tuple[int, ...]:
     return tuple(sorted(AXES.index(a) for a in names))
 
 
-def make_periodic(flow: FlowField, axes, samples: int = 256, tol: float = 1e-4) -> FlowField:
+def make_periodic(flow: FlowField, axes, samples: int = 256, tol: float = 1e-4, device="cpu") -> FlowField:
     """Let ``flow``'s domain wrap around on ``axes`` (names "x", "y", "z"); returns the flow.
 
     Refuses a flow whose velocity differs between the two opposite faces of its box on an axis (its box is
-    not a whole number of spatial periods there), checked at random points and times.
+    not a whole number of spatial periods there), checked at random points and times on ``device`` (the flow's);
+    a family is checked on its draws, every member of a mixture on an equal share of them.
     """
     idx = axis_indices(axes)
-    g = torch.Generator().manual_seed(0)
-    probe = flow
-    if hasattr(flow, "bind"):  # a flow family: check one random draw per sample (each row is its own slot)
-        probe = flow.bind(samples)
-        probe.resample(torch.arange(samples), g)
-    lo, hi = torch.tensor(flow.bounds.lo, dtype=torch.float64), torch.tensor(flow.bounds.hi, dtype=torch.float64)
+    g = torch.Generator(device=device).manual_seed(0)
+    probe = flow.probe(samples, g)
+    lo = torch.tensor(flow.bounds.lo, dtype=torch.float64, device=device)
+    hi = torch.tensor(flow.bounds.hi, dtype=torch.float64, device=device)
     for a in idx:
-        p = (lo + torch.rand(samples, 3, generator=g, dtype=torch.float64) * (hi - lo)).float()
+        p = (lo + torch.rand(samples, 3, generator=g, dtype=torch.float64, device=device) * (hi - lo)).float()
         q = p.clone()
         p[:, a], q[:, a] = float(lo[a]), float(hi[a])
-        t = torch.rand(samples, generator=g) * (flow.period or 10.0)
+        t = torch.rand(samples, generator=g, device=device) * (flow.period or 10.0)
         gap = float((probe.velocity(p, t) - probe.velocity(q, t)).norm(dim=-1).max())
         if gap > tol * max(1.0, flow.max_speed):
             raise ValueError(

@@ -117,6 +117,19 @@ class FlowFamily(FlowField):
         self.members = [m.to(device) for m in self.members]
         return self
 
+    def probe(self, samples: int, generator: torch.Generator) -> FlowFamily:
+        """A copy with ``samples`` slots, each its own draw (``generator``'s device), every member of a mixture in an
+        equal share of the slots however small its weight: what a check of the family evaluates."""
+        bound = self.bind(samples, generator.device)
+        bound.resample(torch.arange(samples, device=generator.device), generator)
+        bound.spread_members()
+        return bound
+
+    def spread_members(self) -> None:
+        """Give every member of every mixture inside this family an equal share of the slots (see :meth:`probe`)."""
+        for m in self.members:
+            m.spread_members()
+
     def state_dict(self) -> dict:
         """Every slot's parameters (and its members'): what an exactly resumed env needs."""
         members = [m.state_dict() for m in self.members]
@@ -355,6 +368,12 @@ class MixtureFamily(FlowFamily):
 
     def draw(self, n, generator, device):
         return {"member": torch.multinomial(self.weights.to(device), n, replacement=True, generator=generator)}
+
+    def spread_members(self):
+        member = self.params["member"]
+        drawn = torch.nonzero(self.weights > 0).flatten().to(member.device)  # a member of weight 0 is never drawn
+        self.params["member"] = drawn[torch.arange(member.shape[0], device=member.device) % drawn.numel()]
+        super().spread_members()
 
     def velocity(self, pos, t, idx=None):
         slots = self.slots(pos, idx)
