@@ -57,6 +57,33 @@ def test_the_oracle_takes_a_detour_where_heading_straight_fails():
     assert oracle["success_rate"] >= 7 / 8
 
 
+def test_a_planner_that_senses_only_around_the_swimmer_misses_the_detour():
+    """With the flow known within 1 of the swimmer (the felt still water beyond), the band is unseen until the
+    swimmer is at its edge, too late to go upstream first: every episode is carried out of the box."""
+    flow = FunctionFlow(cross_current_band, Box((-5.0, -2.0, -2.0), (5.0, 8.0, 2.0)), max_speed=3.0)
+    task = ListTask([[0.0, 0.0, 0.0]], [[0.0, 6.0, 0.0]])
+    local = success(
+        Oracle(candidates=64, horizon=60, iterations=3, blocks=3, sensing_radius=1.0), flow, task, 8, time_limit=40.0
+    )
+    assert local["success_rate"] == 0.0 and local["failures"]["left_domain"]["rate"] == 1.0
+
+
+def passing_band(pos, t):
+    """The band of cross_current_band until t = 4, still water after."""
+    return cross_current_band(pos, t) * (t < 4.0).to(pos.dtype)[:, None]
+
+
+def test_a_planner_without_a_forecast_detours_round_a_current_about_to_stop():
+    """The full oracle knows the band stops at t = 4 and crosses after it; a planner in the flow frozen at planning
+    time goes the long way round it and runs out of time."""
+    flow = FunctionFlow(passing_band, Box((-5.0, -2.0, -2.0), (5.0, 8.0, 2.0)), max_speed=3.0)
+    task = ListTask([[0.0, 0.0, 0.0]], [[0.0, 6.0, 0.0]])
+    settings = dict(candidates=64, horizon=60, iterations=3, blocks=3)
+    assert success(Oracle(**settings), flow, task, 8, time_limit=9.0)["success_rate"] == 1.0
+    frozen = success(Oracle(**settings, forecast=False), flow, task, 8, time_limit=9.0)
+    assert frozen["success_rate"] == 0.0 and frozen["failures"]["timeout"]["rate"] == 1.0
+
+
 def test_the_oracle_is_a_scripted_reference_and_refuses_to_act_without_the_env():
     assert SCRIPTED["oracle"] is Oracle
     with pytest.raises(TypeError, match="act_privileged"):
@@ -68,6 +95,8 @@ def test_oracle_settings_are_checked():
         OracleSettings(candidates=4, elites=8)
     with pytest.raises(ValueError, match="replan_every <= horizon"):
         OracleSettings(horizon=4, replan_every=5, blocks=2)
+    with pytest.raises(ValueError, match="sensing_radius > 0"):
+        OracleSettings(sensing_radius=0.0)
 
 
 def test_the_settings_script_runs_the_suites_tests():

@@ -21,6 +21,12 @@ Cost of a candidate (lower is better):
     otherwise:                                              distance to the target after the horizon
                                                             (minimum image on periodic axes)
 Steps past the episode's time limit count for nothing.
+
+What the planner knows (``forecast``, ``sensing_radius``): by default the true flow everywhere and at every future
+time. With ``forecast=False`` it plans in the flow frozen at the time of planning (a snapshot, no forecast); with a
+``sensing_radius`` R it knows the flow only within R of the swimmer at planning time (minimum image) and assumes the
+flow it feels there everywhere beyond. The env moves the swimmer in the true flow either way: these are the best a
+navigator with that much knowledge of the flow could plan, the references of a policy that senses less than all.
 """
 
 from __future__ import annotations
@@ -46,16 +52,18 @@ class OracleSettings:
     replan_every: int = 5  # steps between replans
     reach_bonus: float = 1000.0
     leave_penalty: float = 1000.0
+    forecast: bool = True  # plans in the flow as it will be; False: in the flow frozen at planning time
+    sensing_radius: float | None = None  # known flow within this distance of the swimmer; None: everywhere
     seed: int = 0
 
     def __post_init__(self):
         ints = ("candidates", "horizon", "blocks", "iterations", "elites", "replan_every")
         bad = [k for k in ints if int(getattr(self, k)) < 1]
         order = self.elites <= self.candidates >= 3 and self.blocks <= self.horizon >= self.replan_every
-        if bad or not order:
+        if bad or not order or (self.sensing_radius is not None and not self.sensing_radius > 0):
             raise ValueError(
                 f"oracle settings need {', '.join(ints)} >= 1, candidates >= 3, elites <= candidates, "
-                f"blocks <= horizon and replan_every <= horizon; got {self}"
+                f"blocks <= horizon, replan_every <= horizon and sensing_radius > 0 (or null); got {self}"
             )
 
 
@@ -149,6 +157,7 @@ class Oracle:
         pos, target = env.pos[rep], env.target[rep]
         theta, psi = env.theta[rep], env.psi[rep]
         flow_vel, t0, steps0 = env.flow_vel[rep], env.t0[rep], env.steps[rep]
+        here, felt = pos, flow_vel  # where the plan starts and the flow felt there (what a sensor reads now)
         plan = cand.reshape(m * K, *cand.shape[2:])
         remaining = (env.max_steps - steps0).clamp_min(0)
         radius = env.reward_cfg.success_radius
@@ -164,7 +173,10 @@ class Oracle:
             new, _ = move(pos, swim, flow_vel, env.dt)
             reached = live & step_reaches(env.flow.displacement(pos, target), new - pos, radius)
             pos = torch.where(live[:, None], env.flow.wrap(new), pos)
-            flow_vel = env._flow_at(pos, t0 + (steps0 + h + 1) * env.dt, rep)
+            flow_vel = env._flow_at(pos, t0 + (steps0 + (h + 1 if s.forecast else 0)) * env.dt, rep)
+            if s.sensing_radius is not None:
+                unseen = env.flow.displacement(here, pos).norm(dim=-1) > s.sensing_radius
+                flow_vel = torch.where(unseen[:, None], felt, flow_vel)
             out = live & ~reached & (~env.flow.in_domain(pos) | in_obstacle(env.flow, pos, rep))
             t = (h + 1) * env.dt
             cost = torch.where(reached, t - s.reach_bonus, cost)
