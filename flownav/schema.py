@@ -353,7 +353,9 @@ DAGGER = {
 ORACLE_DAGGER = {
     "oracle": Str(choices=("oracle", "oracle_long")),
     "oracle_settings": {
-        k: Int(ge=1) for k in ("candidates", "horizon", "blocks", "iterations", "elites", "replan_every")
+        **{k: Int(ge=1) for k in ("candidates", "horizon", "blocks", "iterations", "elites", "replan_every")},
+        "forecast": Bool(),
+        "sensing_radius": Float(gt=0, null=True),
     },
     "iterations": Int(ge=1),
     "episodes": Int(ge=1),
