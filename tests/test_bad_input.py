@@ -174,6 +174,11 @@ CASES = [
         "task.start must be [[x0, y0, z0], [x1, y1, z1]] with x1 > x0 etc.; got [[1, 2, 3], [0, 5, 6]]",
     ),
     ("episodes_zero", evaluate_case("episodes=0"), "episodes must be >= 1, an integer; got 0"),
+    (
+        "sensing_radius_zero",
+        train_case("+algo.oracle_settings.sensing_radius=0", experiment="oracle_imitator"),
+        "algo.oracle_settings.sensing_radius must be > 0, a finite number or null; got 0",
+    ),
     # choices and a key tied to another
     (
         "view_unknown",
