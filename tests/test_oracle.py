@@ -118,3 +118,20 @@ def test_the_settings_script_runs_the_suites_tests():
             assert OmegaConf.to_container(mine[key]) == OmegaConf.to_container(entry[key]), (test, key)
         suite_env = Suite(cfg, log=lambda *_: None).env_cfg(entry)
         assert OmegaConf.to_container(mine.env) == OmegaConf.to_container(suite_env), test
+
+
+def test_the_gradient_climber_turns_towards_where_the_flow_carries_it_to_the_target():
+    """scripts/gradient_climber.py: facing the target along +x, with du_x/dy = +-1 the rule turns towards +-y (where
+    the flow towards the target grows); tau = 0 is head-to-target."""
+    from load import load_module
+
+    script = load_module("scripts/gradient_climber.py")
+    obs = torch.zeros(2, 23)
+    obs[:, 0] = 5.0  # the target 5 ahead along +x
+    obs[:, 6] = 1.0  # cos theta = 1: facing +x
+    obs[:, 21] = 1.0  # swim speed
+    obs[0, script.GRADIENT.start + 1], obs[1, script.GRADIENT.start + 1] = 1.0, -1.0  # du_x/dy
+    turn = script.GradientClimber(tau=3.0)(obs)[:, 1]
+    assert turn[0] > 0.1 and turn[1] < -0.1
+    geo = torch.cat((obs[:, :6], torch.zeros(2, 2)), -1)  # the same state in the geo view: theta = psi = 0
+    assert torch.allclose(script.GradientClimber(tau=0.0)(obs), HeadToTarget()(geo))

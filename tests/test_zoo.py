@@ -127,3 +127,17 @@ def test_to_an_ego_student_the_turned_wake_is_the_posed_wake_with_the_task_turne
     assert abs(turned["success_rate"] - posed["success_rate"]) <= 0.03
     h_turned, h_posed = script.compare(suite, "head_to_target", 135.0, 2000).values()
     assert h_turned["success_rate"] > 0.05 and abs(h_turned["success_rate"] - h_posed["success_rate"]) <= 0.03
+
+
+def test_where_episodes_leave_counts_each_face_of_the_box():
+    """scripts/where_episodes_leave.py: a final position beyond a face counts for that face; head-to-target in the
+    double gyre leaves through no face it could not (the flow is planar: w = 0, so nothing leaves through z)."""
+    from load import load_module
+
+    script = load_module("scripts/where_episodes_leave.py")
+    final = torch.tensor([[-1.0, 1.0, 1.0], [17.0, 1.0, 1.0], [1.0, 9.0, 1.0], [1.0, 1.0, -0.5], [1.0, 9.0, 9.0]])
+    counts = script.faces(final, (0.0, 0.0, 0.0), (16.0, 8.0, 8.0))
+    assert counts == {"-x": 1, "+x": 1, "-y": 0, "+y": 2, "-z": 1, "+z": 1}
+    r = script.leaving("double_gyre", ["head_to_target"], 200)["head_to_target"]
+    assert r["episodes"] == 200 and r["faces"]["-z"] == r["faces"]["+z"] == 0
+    assert r["left"] == sum(r["faces"].values())  # every episode that leaves lies beyond exactly one face
