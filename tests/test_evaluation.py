@@ -13,6 +13,7 @@ import torch
 from hydra import compose, initialize_config_dir
 
 from flownav.agents import DeterministicPolicy
+from flownav.builders import compose_config
 from flownav.checkpoint import CheckpointError, save_policy_checkpoint
 from flownav.envs import NavigationEnv, RegionTask, Status
 from flownav.envs.observations import observation_size
@@ -507,3 +508,20 @@ def test_scripted_references_run_without_checkpoints(tiny_world):
     assert still["failures"]["timeout"]["count"] == still["episodes"] == 24
     with pytest.raises(ValueError, match="choose one of"):
         Suite._scripted("mine", "wander")
+
+
+def test_a_policy_is_the_same_policy_alone_and_in_a_combined_run():
+    """Experiments combine into one run (`+experiment=[a,b,...]`, how REPORT.md is written) whose policies are one
+    global group: an experiment that changed a policy's settings there would change every other experiment's rows of
+    that policy, and their `Reproduce:` command (the experiment alone) would not give them. What a policy is
+    (checkpoint or scripted reference, view, settings) must not depend on the company; its episode count may, and
+    each row reports it."""
+    every = sorted(p.stem for p in (ROOT / "conf" / "evaluate" / "experiment").glob("*.yaml") if p.stem != "paper")
+    combined = compose_config([f"+experiment=[{','.join(every)}]"], app="evaluate")
+    identity = ("checkpoint", "scripted", "obs", "settings")
+    for name in every:
+        alone = compose_config([f"+experiment={name}"], app="evaluate")
+        for suite, spec in alone.suite.items():
+            for policy in spec.get("policies") or []:
+                a, c = alone.policies[policy], combined.policies[policy]
+                assert [a.get(k) for k in identity] == [c.get(k) for k in identity], (name, suite, policy)

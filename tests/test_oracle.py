@@ -135,3 +135,20 @@ def test_the_gradient_climber_turns_towards_where_the_flow_carries_it_to_the_tar
     assert turn[0] > 0.1 and turn[1] < -0.1
     geo = torch.cat((obs[:, :6], torch.zeros(2, 2)), -1)  # the same state in the geo view: theta = psi = 0
     assert torch.allclose(script.GradientClimber(tau=0.0)(obs), HeadToTarget()(geo))
+
+
+def test_an_evaluation_of_the_oracle_does_not_depend_on_what_it_planned_before():
+    """One oracle object serves every suite of a run: its search's random draws restart with each evaluation, so a
+    suite's oracle rows are those of the suite run alone."""
+    flow = FunctionFlow(cross_current_band, Box((-5.0, -2.0, -2.0), (5.0, 8.0, 2.0)), max_speed=3.0)
+    task = ListTask([[0.0, 0.0, 0.0]], [[0.0, 6.0, 0.0]])
+    still = UniformFlow((0.0, 0.0, 0.0), bounds=Box((-4.0, -7.0, 0.0), (22.0, 7.0, 10.0)))
+
+    def episodes(oracle, flow, task):
+        make_env = lambda n, chunk: NavigationEnv(flow, task, num_envs=n, views=("geo",), seed=chunk, time_limit=40.0)  # noqa: E731
+        return run_episodes(oracle, "geo", make_env, 8, chunk_size=8)
+
+    used = Oracle(**SMALL)
+    episodes(used, still, RegionTask())
+    after, fresh = episodes(used, flow, task), episodes(Oracle(**SMALL), flow, task)
+    assert torch.equal(after.status, fresh.status) and torch.equal(after.time, fresh.time)

@@ -82,8 +82,9 @@ class Oracle:
     @torch.inference_mode()
     def act_privileged(self, env: NavigationEnv, slots: Tensor) -> Tensor:
         s = self.settings
-        if env is not self._env:  # a new chunk of episodes: forget the old plans
-            self._env = env
+        if env is not self._env:  # a new chunk of episodes: forget the old plans and restart the search's draws,
+            self._env = env  # so that an evaluation's result does not depend on what the oracle planned before it
+            self.generator.manual_seed(s.seed)
             B = env.num_envs
             self.plan = torch.zeros(B, s.horizon, 4, device=env.device)  # per step: heading (3), speed
             self.age = torch.full((B,), s.replan_every, dtype=torch.long)  # steps since the plan was made
