@@ -25,8 +25,8 @@ Steps past the episode's time limit count for nothing.
 What the planner knows (``forecast``, ``sensing_radius``): by default the true flow everywhere and at every future
 time. With ``forecast=False`` it plans in the flow frozen at the time of planning (a snapshot, no forecast); with a
 ``sensing_radius`` R it knows the flow only within R of the swimmer at planning time (minimum image) and assumes the
-flow it feels there everywhere beyond. The env moves the swimmer in the true flow either way: these are the best a
-navigator with that much knowledge of the flow could plan, the references of a policy that senses less than all.
+flow it feels there everywhere beyond. The env moves the swimmer in the true flow either way: what a navigator
+with that much knowledge of the flow could plan by this search, the references of a policy that senses less than all.
 """
 
 from __future__ import annotations
