@@ -32,7 +32,6 @@ from omegaconf import DictConfig, OmegaConf
 
 from flownav import schema
 from flownav.atomic import atomic_write_text
-from flownav.builders import build_flow, build_task
 from flownav.checkpoint import load_policy
 from flownav.errors import ConfigError, reported_as_one_line
 from flownav.evaluation.protocol import EvalSpec, evaluate
@@ -44,14 +43,6 @@ from flownav.shipping import is_shipped
 
 def command_line() -> str:
     return "python evaluate.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-
-
-def eval_spec(cfg: DictConfig) -> EvalSpec:
-    """The protocol's spec of a single evaluation: ``cfg.flow`` / ``cfg.task`` / ``cfg.env``, ``cfg.episodes``,
-    ``cfg.seed``, ``cfg.chunk_size``."""
-    flow = build_flow(cfg.flow, device=cfg.device)
-    task = build_task(cfg.task, flow)
-    return EvalSpec(flow, task, cfg.env, int(cfg.episodes), int(cfg.seed), int(cfg.chunk_size), str(cfg.device))
 
 
 def load_evaluated(checkpoint: str, cfg: DictConfig):
@@ -71,7 +62,7 @@ def evaluate_checkpoint(cfg: DictConfig, log=print) -> dict:
     policy, payload = load_evaluated(str(cfg.checkpoint), cfg)
     obs = payload["obs"]
     t0 = time.time()
-    out = evaluate(policy, obs, eval_spec(cfg), progress=bool(cfg.progress)).summary
+    out = evaluate(policy, obs, EvalSpec.from_config(cfg), progress=bool(cfg.progress)).summary
     out.update(
         seconds=round(time.time() - t0, 2),
         checkpoint=str(cfg.checkpoint),

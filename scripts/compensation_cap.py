@@ -17,7 +17,7 @@ import sys
 import torch
 
 from flownav.agents.flow_compensating import FlowCompensating
-from flownav.builders import build_flow, build_task, compose_config
+from flownav.builders import compose_config
 from flownav.evaluation.protocol import EvalSpec, evaluate
 from flownav.evaluation.scripted import HeadToTarget
 
@@ -35,9 +35,9 @@ EPISODES = 4000
 
 
 def regime_spec(overrides: list[str]) -> EvalSpec:
-    cfg = compose_config([*overrides, "task=family", "task.regions_share=0"], app="evaluate")
-    flow = build_flow(cfg.flow)
-    return EvalSpec(flow, build_task(cfg.task, flow), cfg.env, EPISODES, int(cfg.seed), int(cfg.chunk_size))
+    return EvalSpec.from_config(
+        compose_config([*overrides, "task=family", "task.regions_share=0"], app="evaluate"), EPISODES
+    )
 
 
 def main(progress: list[float]) -> None:

@@ -15,7 +15,7 @@ import torch
 from torch import Tensor, nn
 
 from flownav.agents.prior import head_to_target, target_and_heading
-from flownav.builders import build_flow, build_task, compose_config
+from flownav.builders import compose_config
 from flownav.envs.observations import GEO_PRIV_FLOW
 from flownav.evaluation.protocol import EvalSpec, evaluate
 
@@ -43,9 +43,7 @@ class GradientClimber(nn.Module):
 
 
 def spec(overrides: list[str], episodes: int) -> EvalSpec:
-    cfg = compose_config(overrides, app="evaluate")
-    flow = build_flow(cfg.flow)
-    return EvalSpec(flow, build_task(cfg.task, flow), cfg.env, episodes, int(cfg.seed), int(cfg.chunk_size))
+    return EvalSpec.from_config(compose_config(overrides, app="evaluate"), episodes)
 
 
 def main(selection_episodes: int = 2000, test_episodes: int = 10_000) -> dict:

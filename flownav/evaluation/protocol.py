@@ -47,6 +47,24 @@ class EvalSpec:
     chunk_size: int = 10_000
     device: str = "cpu"
 
+    @classmethod
+    def from_config(cls, cfg: Mapping, episodes: int | None = None) -> EvalSpec:
+        """The spec of evaluate.py's config: ``cfg.flow`` / ``cfg.task`` / ``cfg.env``, ``cfg.episodes`` (or
+        ``episodes``), ``cfg.seed``, ``cfg.chunk_size``, ``cfg.device``."""
+        from flownav.builders import build_flow, build_task  # builders imports the envs; keep this module light
+
+        flow = build_flow(cfg["flow"], device=cfg["device"])
+        n = int(cfg["episodes"] if episodes is None else episodes)
+        return cls(
+            flow,
+            build_task(cfg["task"], flow),
+            cfg["env"],
+            n,
+            int(cfg["seed"]),
+            int(cfg["chunk_size"]),
+            str(cfg["device"]),
+        )
+
     def make_env(self, views: Sequence[str]) -> MakeEnv:
         """``make_env(num_envs, chunk)`` for :func:`run_episodes`, seeded by :func:`env_seed`."""
         from flownav.builders import build_env  # builders imports the envs; keep this module light
