@@ -108,7 +108,11 @@ def suite_outputs(cfg: DictConfig) -> None:
             "drop ship=true (and the explicit report=/results=/figures_dir=) for a try, or drop max_episodes"
         )
     keys = [(o, o.split("=")[0].lstrip("+~")) for o in command_line_overrides()]
-    changed = [o for o, k in keys if k.startswith(("suite.", "policies.")) and k.endswith("episodes")]
+    changed = [
+        o
+        for o, k in keys
+        if k.startswith(("suite.", "policies.")) and any(part.endswith("episodes") for part in k.split("."))
+    ]
     if shipped and changed:
         raise ConfigError(
             f"{changed[0]} changes an experiment's episode count: only the counts in conf/evaluate/experiment/ "

@@ -17,6 +17,7 @@ from flownav.builders import compose_config
 from flownav.checkpoint import CheckpointError, save_policy_checkpoint
 from flownav.envs import NavigationEnv, RegionTask, Status
 from flownav.envs.observations import observation_size
+from flownav.evaluation.experiments import Suite
 from flownav.evaluation.metrics import subregion_counts, summarize, wilson_interval
 from flownav.evaluation.rollout import run_episodes
 from flownav.evaluation.scripted import ACTION_LOW, HeadToTarget, action_high
@@ -495,7 +496,6 @@ def test_provenance_is_the_code_before_the_run(tiny_world, monkeypatch, tmp_path
 
 def test_scripted_references_run_without_checkpoints(tiny_world):
     """The suite's scripted references need no checkpoint; a passive tracer in still water never arrives."""
-    from flownav.evaluation.experiments import Suite
 
     root, data, ck = tiny_world
     cfg = compose_eval("+experiment=paper_training", *tiny_overrides(root, data, ck))
@@ -514,10 +514,11 @@ def test_a_policy_is_the_same_policy_alone_and_in_a_combined_run():
     """Experiments combine into one run (`+experiment=[a,b,...]`, how REPORT.md is written) whose policies are one
     global group: an experiment that changed a policy's settings there would change every other experiment's rows of
     that policy, and their `Reproduce:` command (the experiment alone) would not give them. What a policy is
-    (checkpoint or scripted reference, view, settings) must not depend on the company; its episode count may, and
-    each row reports it."""
+    (checkpoint or scripted reference, view, settings) and how many episodes of it an entry runs must not depend
+    on the company."""
     every = sorted(p.stem for p in (ROOT / "conf" / "evaluate" / "experiment").glob("*.yaml") if p.stem != "paper")
     combined = compose_config([f"+experiment=[{','.join(every)}]"], app="evaluate")
+    together = Suite(combined, log=lambda *_: None)
     identity = ("checkpoint", "scripted", "obs", "settings")
     for name in every:
         alone = compose_config([f"+experiment={name}"], app="evaluate")
@@ -525,3 +526,19 @@ def test_a_policy_is_the_same_policy_alone_and_in_a_combined_run():
             for policy in spec.get("policies") or []:
                 a, c = alone.policies[policy], combined.policies[policy]
                 assert [a.get(k) for k in identity] == [c.get(k) for k in identity], (name, suite, policy)
+                count = Suite(alone, log=lambda *_: None).episodes_of(spec, policy)
+                assert count == together.episodes_of(combined.suite[suite], policy), (name, suite, policy)
+    # the cap is the entry's: the well-posed ABC table's oracle runs 200 episodes, the time-limit study's 1000
+    assert together.episodes_of(combined.suite.abc_periodic, "oracle_long") == 200
+    assert together.episodes_of(combined.suite.abc_periodic_time_limit, "oracle_long") == 1000
+
+
+def test_an_entrys_episode_caps_name_its_policies_and_are_counts():
+    for caps, message in [
+        ("{oracle: 3}", r"^suite\.training\.policy_episodes\.oracle: not one of the entry's policies \["),
+        ("{passive: 0}", r"^suite\.training\.policy_episodes\.passive is 0; give a whole number of episodes >= 1$"),
+    ]:
+        overrides = ["+experiment=paper_training", "max_episodes=4", f"+suite.training.policy_episodes={caps}"]
+        cfg = compose_config(overrides, app="evaluate")
+        with pytest.raises(ValueError, match=message):
+            Suite(cfg, log=lambda *_: None).run("training", cfg.suite.training)

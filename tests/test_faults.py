@@ -354,9 +354,13 @@ def test_shipping_a_partial_run_is_refused_before_anything_is_written(tmp_path):
             ["suite.training.episodes=50"],
             "error: suite.training.episodes=50 changes an experiment's episode count: only the counts in ",
         ),
+        (
+            ["+suite.training.policy_episodes.passive=5"],
+            "error: +suite.training.policy_episodes.passive=5 changes an experiment's episode count: only the counts ",
+        ),
         (["seed=0,1"], "error: a -m sweep writing results/paper.json: its jobs would race for one file; "),
     ],
-    ids=["episodes_override", "sweep"],
+    ids=["episodes_override", "policy_episodes_override", "sweep"],
 )
 def test_shipping_an_evaluation_is_refused_for_changed_counts_and_in_a_sweep(args, message, tmp_path):
     """ship=true writes REPORT.md and results/ only with the experiments' own episode counts, from one run."""

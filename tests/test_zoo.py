@@ -94,7 +94,7 @@ def test_the_suite_runs_tiny_and_skips_a_missing_checkpoint(tmp_path):
     overrides = [
         "+experiment=generalization",
         "max_episodes=6",
-        "policies.oracle.max_episodes=3",
+        "suite.generalization.policy_episodes.oracle=3",
         "++policies.oracle.settings={candidates: 8, horizon: 20, iterations: 1, elites: 2}",
         "suite.generalization.policies=[passive,head_to_target,oracle,generalist_student]",
         "policies.generalist_student.checkpoint=" + str(tmp_path / "absent.pt"),

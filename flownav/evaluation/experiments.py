@@ -105,12 +105,18 @@ class Suite:
         info = {"checkpoint": f"scripted:{kind}", "sha256": "-", "obs": view, "role": "reference"}
         return policy, view, info | ({"settings": settings} if settings else {})
 
+    def episodes_of(self, spec, name: str) -> int:
+        """How many episodes entry ``spec`` runs of policy ``name``: its ``episodes``, capped by its own
+        ``policy_episodes[name]`` or, where it names none, by the policy's ``max_episodes`` (the oracle runs
+        fewer). The cap is the entry's, so a policy's count does not depend on what else runs with it."""
+        caps = spec.get("policy_episodes") or {}
+        cap = caps[name] if name in caps else self.cfg.policies[name].get("max_episodes")
+        return min(int(spec.episodes), int(cap)) if cap else int(spec.episodes)
+
     def spec(self, name: str, flow, task_cfg, env_cfg, episodes: int, seed: int | None = None) -> EvalSpec:
         """The :class:`EvalSpec` of policy ``name`` on one setting: the suite's seed (or ``seed``), its chunk size,
-        ``episodes`` capped by ``max_episodes`` and by the policy's own ``max_episodes`` (the oracle runs fewer)."""
+        ``episodes`` capped by ``max_episodes`` (an entry's count per policy: :meth:`episodes_of`)."""
         episodes = self.episodes(episodes)
-        cap = self.cfg.policies[name].get("max_episodes")
-        episodes = min(episodes, int(cap)) if cap else episodes
         seed = self.seed if seed is None else int(seed)
         return EvalSpec(flow, build_task(task_cfg, flow), env_cfg, episodes, seed, self.chunk_size, self.device)
 
@@ -162,6 +168,14 @@ class Suite:
         out["targets"] = plain(spec.get("targets")) or []
         out["missing"] = []
         out["policies"] = {}
+        for pol, n in (spec.get("policy_episodes") or {}).items():
+            if pol not in k.policies(spec):
+                raise ValueError(
+                    f"suite.{name}.policy_episodes.{pol}: not one of the entry's policies {list(k.policies(spec))}; "
+                    "drop it or add the policy to the entry"
+                )
+            if not isinstance(n, int) or isinstance(n, bool) or n < 1:
+                raise ValueError(f"suite.{name}.policy_episodes.{pol} is {n!r}; give a whole number of episodes >= 1")
         for pol in dict.fromkeys(k.policies(spec)):  # report every missing checkpoint, even if the flow is missing
             try:
                 self.policy(pol)

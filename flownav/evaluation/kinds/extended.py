@@ -15,7 +15,7 @@ def run(suite, name, spec, out) -> dict:
     bins = [int(b) for b in spec.get("bins", (10, 10, 10))]
     results, maps, figures = {}, {}, []
     for pol in suite.each_policy(spec, out):
-        ev = suite.measure(name, pol, flow, spec.task, env_cfg, spec.episodes)
+        ev = suite.measure(name, pol, flow, spec.task, env_cfg, suite.episodes_of(spec, pol))
         counts, wins = subregion_counts(ev.episodes.start, ev.episodes.success, flow.bounds, bins)
         results[pol] = ev.summary
         maps[pol] = {"episodes": counts.tolist(), "successes": wins.tolist()}

@@ -43,7 +43,9 @@ def run(suite, name, spec, out) -> dict:
         results[pol] = {}
         for angle in angles:
             env_cfg = OmegaConf.merge(suite.env_cfg(spec), {"misalignment_deg": angle})
-            ev = suite.measure(name, pol, flow, spec.task, env_cfg, spec.episodes, label=f" {angle:g} deg")
+            ev = suite.measure(
+                name, pol, flow, spec.task, env_cfg, suite.episodes_of(spec, pol), label=f" {angle:g} deg"
+            )
             results[pol][angle_key(angle)] = ev.summary
     figures = suite.sweep_figure(name, results, angles, "misalignment angle (deg)", out["title"])
     return {"angles": angles, "results": results, "figures": figures}

@@ -27,7 +27,9 @@ def run(suite, name, spec, out) -> dict:
         results[pol] = {}
         for ratio, scale in zip(ratios, scales, strict=True):
             flow = suite.flow(OmegaConf.merge(base_cfg, {"speed_scale": scale}))
-            ev = suite.measure(name, pol, flow, spec.task, env_cfg, spec.episodes, label=f" ratio {ratio:.3f}")
+            ev = suite.measure(
+                name, pol, flow, spec.task, env_cfg, suite.episodes_of(spec, pol), label=f" ratio {ratio:.3f}"
+            )
             results[pol][ratio_key(ratio)] = ev.summary | {"flow_speed_scale": scale}
     figures = suite.sweep_figure(name, results, ratios, "U_swim,max / V_flow,max", out["title"], keyfn=ratio_key)
     return {

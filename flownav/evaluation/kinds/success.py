@@ -48,5 +48,5 @@ def run(suite, name, spec, out) -> dict:
     env_cfg = suite.env_cfg(spec)
     results = {}
     for pol in suite.each_policy(spec, out):
-        results[pol] = suite.measure(name, pol, flow, spec.task, env_cfg, spec.episodes).summary
+        results[pol] = suite.measure(name, pol, flow, spec.task, env_cfg, suite.episodes_of(spec, pol)).summary
     return {"results": results, "flow_max_speed": float(flow.max_speed)}

@@ -21,7 +21,7 @@ def run(suite, name, spec, out) -> dict:
     env_cfg = OmegaConf.merge(suite.env_cfg(spec), {"time_limit": limits[-1]})
     results: dict[str, dict] = {}
     for pol in suite.each_policy(spec, out):
-        ep = suite.rollout(pol, flow, spec.task, env_cfg, spec.episodes).episodes
+        ep = suite.rollout(pol, flow, spec.task, env_cfg, suite.episodes_of(spec, pol)).episodes
         results[pol] = {}
         for limit in limits:
             results[pol][angle_key(limit)] = summarize(

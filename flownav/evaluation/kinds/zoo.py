@@ -1,7 +1,7 @@
 """``kind: zoo``, the generalisation suite: every policy on held-out flows, against head-to-target and the oracle.
 
 A case is a flow, a task and env overrides (``suite.<name>.cases``). Each policy runs the same episodes
-of each case (the oracle at most ``policies.oracle.max_episodes``). Per policy, the summary row says on how
+of each case (the oracle at most the entry's ``policy_episodes.oracle``). Per policy, the summary row says on how
 many cases it beats head-to-target (success >= head-to-target's - ``margin``) and what fraction of the
 oracle's success it reaches (its success / the oracle's, on the cases where the oracle succeeds at all),
 over all cases and over the held-out ones.
@@ -82,7 +82,8 @@ def run_zoo(suite, name: str, spec, out: dict) -> dict:
         env_cfg = OmegaConf.merge(suite.env_cfg(spec), cs.get("env") or {})
         flows[case] = _case_info(cs, flow, env_cfg)
         results[case] = {
-            pol: suite.measure(f"{name}/{case}", pol, flow, cs.task, env_cfg, spec.episodes).summary for pol in policies
+            pol: suite.measure(f"{name}/{case}", pol, flow, cs.task, env_cfg, suite.episodes_of(spec, pol)).summary
+            for pol in policies
         }
         cases[case] = round(time.time() - t0, 2)
     summary = summarise_policies(results, flows, margin)
