@@ -153,7 +153,7 @@ def run_paper(cfg: DictConfig, log=print) -> dict:
     prov = provenance(cmd)
     t0 = time.time()
     results = run_suite(cfg, log=log)
-    data = merge_results(resolve(str(cfg.results)), results, prov)
+    data = merge_results(resolve(str(cfg.results)), results, prov, log=log)
     report = write_report(data, resolve(str(cfg.report)), cmd, seconds=time.time() - t0, commit=prov["commit"])
     log(f"wrote {cfg.results} and {report} in {time.time() - t0:.1f} s")
     return results

@@ -476,6 +476,32 @@ def test_the_loss_curve_section_takes_the_papers_numbers_from_the_config_only(tm
     assert section.count("paper") == 1, section  # the kind's own lines quote no paper numbers
 
 
+def test_a_skipped_experiment_keeps_the_measured_result_it_would_replace(tmp_path):
+    """A shipping run that lacks an input (here: the DAgger runs behind Fig. 2c, which live on the machine that
+    trained them) skips that experiment; results/paper.json keeps what was measured, and the log says so."""
+    from flownav.evaluation.report import merge_results
+    from flownav.provenance import provenance
+
+    cfg = compose_config(["+experiment=paper_loss_curves"], app="evaluate")
+    cfg.suite.loss_curves.run_globs = [str(tmp_path / "none" / "*" / "metrics.csv")]
+    cfg.suite.loss_curves.json = str(tmp_path / "student_loss.json")
+    skipped = Suite(cfg, log=lambda *_: None).run("loss_curves", cfg.suite.loss_curves)
+    assert skipped["skipped"] and "no DAgger runs found" in skipped["missing"][0]
+    measured = {"kind": "loss_curves", "curve": {"runs": 5, "mean": [0.25, 0.2]}, "missing": [], "policies": {}}
+    prov = provenance("python evaluate.py +experiment=paper")
+    path, lines = tmp_path / "paper.json", []
+    old_skip = {"kind": "success", "missing": ["missing checkpoint"], "skipped": True}
+    merge_results(path, {"loss_curves": measured, "training": old_skip}, prov)
+    data = merge_results(path, {"loss_curves": skipped, "training": skipped | {"kind": "success"}}, prov, lines.append)
+    assert data["experiments"]["loss_curves"]["curve"] == measured["curve"]
+    assert lines == [
+        f"kept the measured result of loss_curves in {path} (this run skipped it: {skipped['missing'][0]})"
+    ]
+    assert data["experiments"]["training"]["missing"] == skipped["missing"]  # a skip replaces a skip...
+    fresh = merge_results(tmp_path / "new.json", {"loss_curves": skipped}, prov)
+    assert fresh["experiments"]["loss_curves"]["skipped"]  # ...or nothing
+
+
 def test_provenance_is_the_code_before_the_run(tiny_world, monkeypatch, tmp_path):
     """The suite's own outputs (figures, results) are tracked files: the commit is read before they change."""
     import evaluate

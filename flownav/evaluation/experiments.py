@@ -183,8 +183,9 @@ class Suite:
                 out["missing"].append(f"{pol}: {e}")
         try:
             out.update(k.run(self, name, spec, out))
-        except Missing as e:
+        except Missing as e:  # nothing measured: the entry is skipped
             out["missing"].append(str(e))
+            out["skipped"] = True
         out["missing"] = list(dict.fromkeys(out["missing"]))
         out["seconds"] = round(time.time() - t0, 2)
         return out

@@ -14,8 +14,9 @@ from flownav.paths import REPO_ROOT
 from flownav.provenance import git_commit
 
 
-def merge_results(path: Path, new: dict, prov: dict) -> dict:
-    """Update ``path`` (results/paper.json) with the experiments just run; keep the others."""
+def merge_results(path: Path, new: dict, prov: dict, log=print) -> dict:
+    """Update ``path`` (results/paper.json) with the experiments just run; keep the others. An experiment this
+    run skipped (an input it needs is missing here) keeps its measured result: a skip never replaces a measurement."""
     path = Path(path)
     old = {}
     if path.is_file():
@@ -25,6 +26,9 @@ def merge_results(path: Path, new: dict, prov: dict) -> dict:
             old = {}
     experiments = dict(old.get("experiments", {}))
     for name, res in new.items():
+        if res.get("skipped") and name in experiments and not experiments[name].get("skipped"):
+            log(f"kept the measured result of {name} in {path} (this run skipped it: {'; '.join(res['missing'])})")
+            continue
         experiments[name] = res | {"provenance": prov}
     data = {"format": "flownav-paper-results-v1", "experiments": experiments}
     atomic_write_text(path, json.dumps(data, indent=1, default=_json_default))
