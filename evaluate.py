@@ -118,6 +118,35 @@ def suite_outputs(cfg: DictConfig) -> None:
             f"{changed[0]} changes an experiment's episode count: only the counts in conf/evaluate/experiment/ "
             f"write {shipped[0]}; drop ship=true (and the explicit report=/results=/figures_dir=) for a try"
         )
+    if is_shipped(cfg.results):
+        refuse_dropping_shipped_rows(cfg)
+
+
+def refuse_dropping_shipped_rows(cfg: DictConfig) -> None:
+    """A policy whose checkpoint is missing here would lose the rows it has in the shipped results (an entry is
+    rewritten whole): refused before anything runs."""
+    from flownav.evaluation.experiments import Missing, Suite
+    from flownav.evaluation.kinds import kind
+
+    path = resolve(str(cfg.results))
+    try:
+        shipped = json.loads(path.read_text()).get("experiments", {}) if path.is_file() else {}
+    except json.JSONDecodeError:
+        return
+    suite = Suite(cfg, log=lambda *_: None)
+    for name, spec in cfg.suite.items():
+        if spec is None or not spec.get("enabled", True) or name not in shipped:
+            continue
+        for pol in kind(str(spec.kind)).policies(spec):
+            if pol not in (shipped[name].get("policies") or {}):
+                continue
+            try:
+                suite.policy(pol)
+            except Missing as e:
+                raise ConfigError(
+                    f"{e}; {cfg.results} has {pol}'s rows of {name}, which this run would drop: restore it, or drop "
+                    "ship=true (and the explicit report=/results=/figures_dir=) for a try"
+                ) from None
 
 
 def refuse_in_a_sweep(shipped: list[str]) -> None:

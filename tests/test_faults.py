@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import math
 import os
 import re
@@ -344,6 +345,29 @@ def test_shipping_a_partial_run_is_refused_before_anything_is_written(tmp_path):
     with pytest.raises(ConfigError, match=r"^max_episodes=50 caps the episode count: a reduced run never writes"):
         evaluate.run(ecfg, log=lambda *_: None)
     assert tree_digest(*SHIPPED) == before
+
+
+def test_shipping_without_a_checkpoint_the_shipped_results_have_is_refused(tmp_path):
+    """An entry is rewritten whole: shipping it without one of its policies would drop that policy's shipped rows."""
+    import evaluate
+
+    absent = tmp_path / "absent.pt"
+    before = tree_digest(*SHIPPED)
+    with initialize_config_dir(config_dir=str(ROOT / "conf" / "evaluate"), version_base="1.3"):
+        ecfg = compose(
+            "config", overrides=["+experiment=paper_training", "ship=true", f"policies.student.checkpoint={absent}"]
+        )
+    with pytest.raises(
+        ConfigError,
+        match=r"^missing checkpoint .*absent\.pt: run `python train.py \+experiment=student`; "
+        r".*paper\.json has student's rows of training, which this run would drop: restore it",
+    ):
+        evaluate.run(ecfg, log=lambda *_: None)
+    assert tree_digest(*SHIPPED) == before
+    # a policy the shipped entry never had is no loss: nothing refused
+    ecfg.results = str(tmp_path / "paper.json")
+    (tmp_path / "paper.json").write_text(json.dumps({"experiments": {"training": {"policies": {"teacher": {}}}}}))
+    evaluate.refuse_dropping_shipped_rows(ecfg)
 
 
 @pytest.mark.slow
