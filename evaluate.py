@@ -125,8 +125,7 @@ def suite_outputs(cfg: DictConfig) -> None:
 def refuse_dropping_shipped_rows(cfg: DictConfig) -> None:
     """A policy whose checkpoint is missing here would lose the rows it has in the shipped results (an entry is
     rewritten whole): refused before anything runs."""
-    from flownav.evaluation.experiments import Missing, Suite
-    from flownav.evaluation.kinds import kind
+    from flownav.evaluation.experiments import Suite
 
     path = resolve(str(cfg.results))
     try:
@@ -137,16 +136,12 @@ def refuse_dropping_shipped_rows(cfg: DictConfig) -> None:
     for name, spec in cfg.suite.items():
         if spec is None or not spec.get("enabled", True) or name not in shipped:
             continue
-        for pol in kind(str(spec.kind)).policies(spec):
-            if pol not in (shipped[name].get("policies") or {}):
-                continue
-            try:
-                suite.policy(pol)
-            except Missing as e:
+        for pol, why in suite.missing(name, spec).items():
+            if pol in (shipped[name].get("policies") or {}):
                 raise ConfigError(
-                    f"{e}; {cfg.results} has {pol}'s rows of {name}, which this run would drop: restore it, or drop "
-                    "ship=true (and the explicit report=/results=/figures_dir=) for a try"
-                ) from None
+                    f"{why}; {cfg.results} has {pol}'s rows of {name}, which this run would drop: restore it, or "
+                    "drop ship=true (and the explicit report=/results=/figures_dir=) for a try"
+                )
 
 
 def refuse_in_a_sweep(shipped: list[str]) -> None:

@@ -157,16 +157,31 @@ class Suite:
         return [plot_sweep(results, xs, self.figures_dir / f"{name}.png", xlabel=xlabel, title=title, **kwargs)]
 
     # ------------------------------------------------------------------ one entry
-    def run(self, name: str, spec: DictConfig) -> dict:
+    @staticmethod
+    def entry_kind(name: str, spec):
         try:
-            k = kind(str(spec.kind))
+            return kind(str(spec.kind))
         except ValueError as e:
             raise ValueError(f"suite.{name}.kind: {e}") from None
+
+    def missing(self, name: str, spec) -> dict[str, str]:
+        """Each policy of entry ``name`` that cannot be loaded here, with the line that says what makes it."""
+        out = {}
+        for pol in dict.fromkeys(self.entry_kind(name, spec).policies(spec)):
+            try:
+                self.policy(pol)
+            except Missing as e:
+                out[pol] = str(e)
+        return out
+
+    def run(self, name: str, spec: DictConfig) -> dict:
+        k = self.entry_kind(name, spec)
         t0 = time.time()
         out = {"title": str(spec.get("title", name)), "kind": k.name, "paper_ref": spec.get("paper_ref")}
         out["paper"] = plain(spec.get("paper")) or {}
         out["targets"] = plain(spec.get("targets")) or []
-        out["missing"] = []
+        # every missing checkpoint is reported, even if the flow is missing
+        out["missing"] = [f"{pol}: {e}" for pol, e in self.missing(name, spec).items()]
         out["policies"] = {}
         for pol, n in (spec.get("policy_episodes") or {}).items():
             if pol not in k.policies(spec):
@@ -176,11 +191,6 @@ class Suite:
                 )
             if not isinstance(n, int) or isinstance(n, bool) or n < 1:
                 raise ValueError(f"suite.{name}.policy_episodes.{pol} is {n!r}; give a whole number of episodes >= 1")
-        for pol in dict.fromkeys(k.policies(spec)):  # report every missing checkpoint, even if the flow is missing
-            try:
-                self.policy(pol)
-            except Missing as e:
-                out["missing"].append(f"{pol}: {e}")
         try:
             out.update(k.run(self, name, spec, out))
         except Missing as e:  # nothing measured: the entry is skipped
