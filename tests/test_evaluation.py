@@ -559,9 +559,9 @@ def test_a_policy_is_the_same_policy_alone_and_in_a_combined_run():
     assert together.episodes_of(combined.suite.abc_periodic_time_limit, "oracle_long") == 1000
 
 
-def test_an_entrys_episode_caps_name_its_policies_and_are_counts():
+def test_an_entrys_episode_caps_name_known_policies_and_are_counts():
     for caps, message in [
-        ("{oracle: 3}", r"^suite\.training\.policy_episodes\.oracle: not one of the entry's policies \["),
+        ("{oracel: 3}", r"^suite\.training\.policy_episodes\.oracel: no policy 'oracel' in the config's policies \["),
         ("{passive: 0}", r"^suite\.training\.policy_episodes\.passive is 0; give a whole number of episodes >= 1$"),
     ]:
         overrides = ["+experiment=paper_training", "max_episodes=4", f"+suite.training.policy_episodes={caps}"]

@@ -7,7 +7,7 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from flownav.builders import build_flow, build_task
+from flownav.builders import build_flow, build_task, compose_config
 from flownav.evaluation.experiments import Suite
 from flownav.evaluation.kinds.zoo import family_member
 from flownav.flows.zoo import ZOO, BeltramiShell
@@ -77,6 +77,45 @@ def test_no_zoo_case_is_a_member_of_a_training_family_unless_it_says_so():
     assert family_member(shell, cfg.env, families) == "fourier_modes"
 
 
+def test_the_declared_training_ranges_cover_what_the_generalists_families_draw():
+    """The membership test reads `training_families` from the suite config; if a family config drew beyond them,
+    a zoo case could be a trained flow and still count as held out. Every member of the teacher's and the
+    students' families (their experiments' flows) lies inside a declared family."""
+    declared = {
+        f["name"]: f
+        for f in OmegaConf.to_container(
+            compose_eval("+experiment=generalization").suite.generalization.training_families
+        )
+    }
+
+    def inside(lo_hi, intervals):
+        return any(a <= lo_hi[0] and lo_hi[1] <= b for a, b in intervals)
+
+    def check(member, where):
+        kind = member["type"]
+        if kind == "sum":
+            for name, m in member["members"].items():
+                check(m, f"{where}.{name}")
+        elif kind == "uniform":
+            assert inside(member["speed"], [declared["uniform_currents"]["ranges"]["speed"]]), where
+        elif kind == "fourier":
+            assert inside(member["wavelength"], [declared["fourier_modes"]["ranges"]["wavelength"]]), where
+        elif kind == "wake":
+            ranges = declared["wake"]["ranges"]
+            assert inside(member["strength"], [ranges["strength"]]), where
+            turned = [(a if a >= 0 else a + 360.0) for a in member["angle_deg"]]  # -90..90 -> 270..360 and 0..90
+            for a in turned:
+                assert inside([a, a], ranges["rotation_deg"]), where
+        else:
+            assert kind == "vortex_street" and declared["vortex_streets"]["type"] == "vortex_street", where
+
+    for experiment in ("generalist_teacher", "generalist_student"):
+        flow = OmegaConf.to_container(compose_config([f"+experiment={experiment}"], app="train").flow, resolve=True)
+        assert flow["type"] == "family", experiment
+        for name, member in flow["members"].items():
+            check(member, f"{experiment}: flow.members.{name}")
+
+
 def test_every_zoo_case_builds_with_starts_and_targets_8_to_12_apart():
     cfg = compose_eval("+experiment=generalization")
     g = torch.Generator().manual_seed(0)
@@ -111,6 +150,17 @@ def test_the_suite_runs_tiny_and_skips_a_missing_checkpoint(tmp_path):
     row = r["summary"]["held_out"]["passive"]
     assert row["cases"] == 1 and row["compared_to_head_to_target"] == 1
     assert (tmp_path / "generalization.json").is_file()
+
+
+def test_a_narrowed_entry_keeps_its_caps_and_runs(tmp_path):
+    """`suite.generalization.policies=[...]` without the oracle (how docs evaluate a few policies on the zoo): the
+    entry's `policy_episodes.oracle` stays in the config, unused, and the run goes on."""
+    narrowed = ["max_episodes=4", "suite.generalization.policies=[passive]"]
+    cfg = compose_eval("+experiment=generalization", *narrowed, f"suite.generalization.json={tmp_path / 'g.json'}")
+    cfg.suite.generalization.cases = {"still_water": cfg.suite.generalization.cases.still_water}
+    r = Suite(cfg, log=lambda *_: None).run("generalization", cfg.suite.generalization)
+    assert set(r["results"]["still_water"]) == {"passive"}
+    assert r["results"]["still_water"]["passive"]["episodes"] == 4
 
 
 def test_to_an_ego_student_the_turned_wake_is_the_posed_wake_with_the_task_turned_back():

@@ -1,9 +1,11 @@
 """Reward of eq. 6, signed so that approaching the target pays:
 
-    r_n = -gamma_n dt + alpha (d_{n-1} - d_n) + r_success [d_n < success_radius]
+    r_n = -gamma_n dt + alpha (d_{n-1} - d_n) + r_success [success_n]
 
-with gamma_n = time_penalty * min(d_n / d_0, 1): the time penalty fades as the swimmer
-closes in, so it weighs accuracy over speed near the end. Over a whole episode (eq. 7)
+where success_n means the step's segment from x_{n-1} to x_n passes within success_radius of the target
+(flownav/envs/core.py: a fast step must not jump over the ball; the paper checks d_n only), and
+gamma_n = time_penalty * min(d_n / d_0, 1): the time penalty fades as the swimmer closes in, so it weighs
+accuracy over speed near the end. Over a whole episode (eq. 7)
 
     sum_n r_n = -dt sum_n gamma_n + alpha (d_0 - d_N) + r_success [success].
 """

@@ -183,11 +183,13 @@ class Suite:
         # every missing checkpoint is reported, even if the flow is missing
         out["missing"] = [f"{pol}: {e}" for pol, e in self.missing(name, spec).items()]
         out["policies"] = {}
+        # A cap may name a policy the entry does not run (a narrowed `suite.<name>.policies=[...]` keeps the
+        # experiment's caps); it must name a policy of the config.
         for pol, n in (spec.get("policy_episodes") or {}).items():
-            if pol not in k.policies(spec):
+            if pol not in self.cfg.policies:
                 raise ValueError(
-                    f"suite.{name}.policy_episodes.{pol}: not one of the entry's policies {list(k.policies(spec))}; "
-                    "drop it or add the policy to the entry"
+                    f"suite.{name}.policy_episodes.{pol}: no policy {pol!r} in the config's policies "
+                    f"{sorted(self.cfg.policies)}; fix the name or define policies.{pol}"
                 )
             if not isinstance(n, int) or isinstance(n, bool) or n < 1:
                 raise ValueError(f"suite.{name}.policy_episodes.{pol} is {n!r}; give a whole number of episodes >= 1")
