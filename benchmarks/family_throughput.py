@@ -24,13 +24,11 @@ import time
 from pathlib import Path
 
 import torch
-from omegaconf import OmegaConf
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import env_stepper, machine, write_result  # noqa: E402
 
-from flownav.builders import build_env, build_flow, build_task  # noqa: E402
-from flownav.paths import REPO_ROOT  # noqa: E402
+from flownav.builders import build_env, build_flow, build_task, compose_config  # noqa: E402
 
 FLOWS = (
     "cylinder",
@@ -39,10 +37,13 @@ FLOWS = (
     "family_wake",
     "family_vortex_street",
     "family_mix",
+    "family_mix_wake",
     "family_fourier_periodic",
 )
-# The task each flow is stepped with: the generalist's family task unless the flow has its own.
+# The task each flow is stepped with: the generalist's family task unless the flow has its own; the students'
+# families (family_mix_wake) with their experiment's task (the paper's regions in the posed wake, other starts).
 TASKS = {"cylinder": "regions", "family_fourier_periodic": "abc"}
+EXPERIMENTS = {"family_mix_wake": "generalist_student"}
 VIEWS = {
     "teacher view (geo_sincos)": ("geo_sincos",),
     "privileged views (geo_priv + critic)": ("geo_priv", "geo_priv_critic"),
@@ -51,11 +52,15 @@ VIEWS = {
 
 
 def make_stepper(flow_name: str, views, batch: int):
-    conf = REPO_ROOT / "conf"
-    flow = build_flow(OmegaConf.load(conf / "flow" / f"{flow_name}.yaml"))
-    task_name = TASKS.get(flow_name, "family")
-    task = build_task(OmegaConf.load(conf / "task" / f"{task_name}.yaml"), flow)
-    env = build_env(OmegaConf.load(conf / "env" / "default.yaml"), flow, task, views, num_envs=batch, seed=0)
+    if flow_name in EXPERIMENTS:
+        cfg = compose_config([f"+experiment={EXPERIMENTS[flow_name]}", "env=default"], app="train")
+    else:
+        cfg = compose_config(
+            [f"flow={flow_name}", f"task={TASKS.get(flow_name, 'family')}", "env=default"], app="train"
+        )
+    flow = build_flow(cfg.flow)
+    task = build_task(cfg.task, flow)
+    env = build_env(cfg.env, flow, task, views, num_envs=batch, seed=0)
     return env_stepper(env)
 
 
