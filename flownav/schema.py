@@ -317,6 +317,7 @@ PPO = {
     },
     "critic": NETWORK,
     "init_from": Str(null=True),
+    "critic_warmup_frames": Int(ge=0),
     "log_every": Int(ge=1),
     "eval_every": Int(ge=0),
     "eval_episodes": Int(ge=0),

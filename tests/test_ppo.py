@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import re
 from pathlib import Path
 
 import pytest
@@ -188,3 +189,72 @@ def test_resume_refuses_other_view(tmp_path):
         )
     with pytest.raises(ConfigError, match="geo"):
         run(cfg, tmp_path / "x")
+
+
+def _student_file(tmp_path, view="geo_sincos", **config):
+    """A DAgger-shaped student (3 outputs) with a non-trivial last layer, saved as a checkpoint."""
+    from flownav.agents.networks import DeterministicPolicy
+    from flownav.checkpoint import save_policy_checkpoint
+
+    torch.manual_seed(3)
+    student = DeterministicPolicy(observation_size(view), [0.0, -0.79, -1.57], [1.0, 0.79, 1.57], hidden=[8], **config)
+    torch.nn.init.normal_(student.net[-1].weight)
+    student.normalizer.update(torch.randn(500, observation_size(view)) * 2 + 1)
+    return save_policy_checkpoint(tmp_path / "student.pt", student, view, "student"), student
+
+
+def test_a_dagger_student_warm_starts_the_ppo_actor_with_its_own_action():
+    """algo.init_from=<a DAgger student>: the actor's location outputs are the student's (its deterministic action
+    exactly), its scale outputs the actor's own initial ones; another prior is refused in one line."""
+    import tempfile
+
+    from tensordict import TensorDict
+    from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+    from flownav.agents.actor_critic import make_actor_critic
+    from flownav.agents.networks import warm_start_state
+    from flownav.errors import ConfigError
+
+    cfg = make_cfg("algo.actor.hidden=[8]")
+    low, high = torch.tensor([0.0, -0.79, -1.57]), torch.tensor([1.0, 0.79, 1.57])
+    with tempfile.TemporaryDirectory() as d:
+        path, student = _student_file(Path(d))
+        payload = load_checkpoint(path)
+    policy, actor, _, _ = make_actor_critic("geo_sincos", "geo_sincos", low, high, cfg.algo.actor, cfg.algo.critic)
+    scale_rows = policy.net[-1].weight[3:].clone()
+    policy.load_state_dict(warm_start_state(policy, payload["policy"]))
+    obs = torch.randn(64, 9) * 3
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        td = actor(TensorDict({"geo_sincos": obs}, batch_size=[64]))
+    torch.testing.assert_close(td["action"], student(obs))
+    assert torch.equal(policy.net[-1].weight[3:], scale_rows)
+    with_prior = make_cfg("algo.actor.hidden=[8]", "algo.actor.prior=head_to_target").algo.actor
+    other, *_ = make_actor_critic("geo_sincos", "geo_sincos", low, high, with_prior, cfg.algo.critic)
+    message = (
+        "the checkpoint's policy corrects prior=None turning None, this one prior=geo_sincos turning left_biased: "
+        "set algo.actor.prior and algo.actor.prior_turn to match"
+    )
+    with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
+        warm_start_state(other, payload["policy"])
+
+
+def test_during_the_critic_warmup_only_the_critic_learns(tmp_path):
+    """algo.critic_warmup_frames: a warm-started actor keeps its weights (and so its action) while the critic
+    learns; after the warm-up both learn."""
+    from tiny import TINY_PPO, compose_train
+
+    from train import run
+
+    path, student = _student_file(tmp_path)
+    start = ["algo.init_from=" + str(path), "algo.update_normalizer=false", "algo.final_eval_episodes=0"]
+    run(compose_train(*TINY_PPO, *start, "algo.critic_warmup_frames=512"), tmp_path / "warm")
+    saved = load_checkpoint(tmp_path / "warm" / "checkpoints" / "last.pt")
+    policy, _ = load_policy(tmp_path / "warm" / "checkpoints" / "last.pt")
+    obs = torch.randn(64, 9) * 3
+    torch.testing.assert_close(policy(obs), student(obs))
+    critic0 = load_checkpoint(path).get("train_state") or {}
+    assert "critic" not in critic0 and saved["train_state"]["critic"]  # a critic was trained from scratch
+    # 3 batches of 256 frames, the last two after the warm-up (the learning rate anneals to 0 only at the end)
+    run(compose_train(*TINY_PPO, *start, "algo.critic_warmup_frames=256", "algo.total_frames=768"), tmp_path / "after")
+    moved, _ = load_policy(tmp_path / "after" / "checkpoints" / "last.pt")
+    assert not torch.allclose(moved(obs), student(obs))

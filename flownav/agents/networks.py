@@ -128,6 +128,38 @@ class DeterministicPolicy(nn.Module):
         return super().load_state_dict(state_dict, strict=strict, assign=assign)
 
 
+def warm_start_state(policy: DeterministicPolicy, saved: dict) -> dict:
+    """The state dict that starts ``policy`` from a saved policy (``{"config", "state_dict"}`` of a checkpoint).
+
+    Same shape: the saved weights. A deterministic policy (``action_dim`` outputs, a DAgger student) into a PPO
+    actor (``2 * action_dim``): the saved weights give the location outputs and ``policy``'s own last-layer rows the
+    scale outputs, so the actor's deterministic action is the saved policy's. The prior must be the same (the same
+    weights correct another head-to-target otherwise)."""
+    from flownav.errors import ConfigError
+
+    mine, theirs = policy.config, saved["config"]
+
+    def prior(c):
+        return (c.get("prior"), (c.get("prior_turn") or TURN_LEFT_BIASED) if c.get("prior") else None)
+
+    if prior(mine) != prior(theirs):
+        raise ConfigError(
+            f"the checkpoint's policy corrects prior={theirs.get('prior')} turning {prior(theirs)[1]}, this one "
+            f"prior={mine.get('prior')} turning {prior(mine)[1]}: set algo.actor.prior and algo.actor.prior_turn to "
+            "match"
+        )
+    state = dict(saved["state_dict"])
+    a = policy.action_dim
+    if theirs.get("n_outputs") == a and mine["n_outputs"] == 2 * a:
+        own = policy.state_dict()
+        last = max((k for k in state if _layer_index(k) >= 0), key=_layer_index)
+        bias = last.replace("weight", "bias")
+        check_mlp_size(state, {**mine, "n_outputs": a}, "algo.actor.hidden={hidden} (PPO)")
+        state[last] = torch.cat((state[last], own[last][a:]), 0)
+        state[bias] = torch.cat((state[bias], own[bias][a:]), 0)
+    return state
+
+
 def check_mlp_size(state_dict, config: dict, fix: str) -> None:
     """Refuse, in one line naming the sizes and the ``fix`` (a key to set, ``{hidden}`` the saved sizes),
     the weights of an MLP (``net.*``) of another shape than ``config`` (``obs_dim``, ``hidden``, ``n_outputs``)."""

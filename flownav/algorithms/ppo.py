@@ -25,7 +25,7 @@ from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
 from flownav.agents.actor_critic import make_actor_critic
-from flownav.agents.networks import DeterministicPolicy
+from flownav.agents.networks import DeterministicPolicy, warm_start_state
 from flownav.algorithms.common import eval_metrics, require_finite_update
 from flownav.builders import build_env, build_flow, build_task
 from flownav.checkpoint import RunCheckpoints, load_checkpoint, load_resume_checkpoint
@@ -81,6 +81,7 @@ def train(cfg, run_dir) -> dict:
     frames_per_batch = num_envs * int(a.rollout_steps)
     n_minibatches = frames_per_batch // int(a.minibatch_size)
     eval_every, eval_episodes = int(a.get("eval_every") or 0), int(a.get("eval_episodes") or 0)
+    critic_warmup = int(a.get("critic_warmup_frames") or 0)
     role = str(cfg.get("role") or ("teacher" if obs_key in GEO_VIEWS else "baseline"))
     figure_episodes = int(cfg.logger.get("figure_episodes") or 0)  # trajectories drawn at each periodic evaluation
 
@@ -126,9 +127,11 @@ def train(cfg, run_dir) -> dict:
         payload = load_checkpoint(str(a.init_from))
         if payload["obs"] != obs_key:
             raise ConfigError(f"algo.init_from={a.init_from} reads {payload['obs']!r}, this run reads {obs_key!r}")
-        policy.load_state_dict(payload["policy"]["state_dict"])
+        policy.load_state_dict(warm_start_state(policy, payload["policy"]))
         if payload.get("train_state") and "critic" in payload["train_state"]:
             critic_net.load_state_dict(payload["train_state"]["critic"])
+        else:  # a fresh critic (the checkpoint has none, e.g. a DAgger student): warm its normaliser up
+            critic_net.normalizer.update(env.reset()[critic_key])
     else:  # warm the normalisers up on the first observations so the first batch sees sane inputs
         first = env.reset()
         policy.normalizer.update(first[obs_key])  # in place: the loss holds these buffers
@@ -196,7 +199,9 @@ def train(cfg, run_dir) -> dict:
                 buffer.extend(data.reshape(-1))
                 for _ in range(n_minibatches):
                     loss = loss_module(buffer.sample())
-                    total = loss["loss_objective"] + loss["loss_critic"] + loss.get("loss_entropy", 0.0)
+                    total = loss["loss_critic"]
+                    if frames > critic_warmup:  # a warm-started actor waits for the critic's advantages
+                        total = total + loss["loss_objective"] + loss.get("loss_entropy", 0.0)
                     optim.zero_grad(set_to_none=True)
                     total.backward()
                     loss["grad_norm"] = nn.utils.clip_grad_norm_(loss_module.parameters(), float(a.max_grad_norm))
