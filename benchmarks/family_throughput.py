@@ -7,12 +7,12 @@ teacher=<run dir> --cost student=<run dir> ...`` writes the training runs' wall 
 ``final_metrics.json``) to ``benchmarks/results/generalist_cost.json`` (``--cost-file NAME``: NAME.json) instead.
 
 Every case steps ``NavigationEnv.step_and_maybe_reset`` with random actions (resets included) on the flow
-config ``conf/flow/<name>.yaml`` and the task the generalist trains on (``task=family``; the wake alone:
-the paper's regions; the periodic family: the ABC task it is used with), with the teacher's view (``geo_sincos``),
-with the generalist teacher's views (``geo_priv`` + ``geo_priv_critic``: 4 look-ups per step instead of 1) and with
-the wider ``geo_priv_around`` (12 more points per step). The machine is shared, so the cases
-take turns window by window and each keeps its best window; ratios are against ``cylinder`` with
-``geo_sincos`` measured in the same rounds.
+config ``conf/flow/<name>.yaml`` and the task the generalist trains on (``task=family``; the wake alone: the
+paper's regions; the periodic family: the ABC task it is used with; the students' families: their experiment's),
+with the teacher's view (``geo_sincos``), with the generalist teacher's views (``geo_priv`` + ``geo_priv_critic``:
+4 look-ups per step instead of 1) and with the wider ``geo_priv_around`` (12 more points per step). The machine is
+shared, so the cases take turns window by window and each keeps its best window; ratios are against ``cylinder``
+with ``geo_sincos`` measured in the same rounds.
 """
 
 from __future__ import annotations
