@@ -16,6 +16,7 @@ POLICIES = {
     "oracle": "oracle",
     "teacher": "teacher (paper)",
     "student": "student (paper)",
+    "baseline": "baseline (paper: PPO on the ego view)",
     "student_robust": "student_robust",
     "generalist_student": "**generalist_student** (`ego_mem`)",
     "generalist_student_noisy": "generalist_student_noisy (`ego_mem`, trained with noisy sensors)",
