@@ -120,22 +120,26 @@ def train(cfg, run_dir) -> dict:
     frames, iteration, wall_offset, best_success, history_best, time_to_target = 0, 0, 0.0, -1.0, {}, None
     window = EpisodeWindow()  # outcomes of the episodes that end between log rows
     resumed = None
+    warm_actor = warm_critic = True  # a normaliser that starts from nothing is warmed up on the first observations
     if cfg.resume:
         _, resumed = load_resume_checkpoint(cfg.resume, expect_obs=obs_key, needs=RESUME_NEEDS)
         critic_net.load_state_dict(resumed["train_state"]["critic"])
+        warm_actor = warm_critic = False
     elif a.get("init_from"):  # weights and normalisers from another run, counters from zero
         payload = load_checkpoint(str(a.init_from))
         if payload["obs"] != obs_key:
             raise ConfigError(f"algo.init_from={a.init_from} reads {payload['obs']!r}, this run reads {obs_key!r}")
         policy.load_state_dict(warm_start_state(policy, payload["policy"]))
-        if payload.get("train_state") and "critic" in payload["train_state"]:
+        warm_actor = False
+        if payload.get("train_state") and "critic" in payload["train_state"]:  # else (a DAgger student) a fresh critic
             critic_net.load_state_dict(payload["train_state"]["critic"])
-        else:  # a fresh critic (the checkpoint has none, e.g. a DAgger student): warm its normaliser up
-            critic_net.normalizer.update(env.reset()[critic_key])
-    else:  # warm the normalisers up on the first observations so the first batch sees sane inputs
+            warm_critic = False
+    if warm_actor or warm_critic:  # so the first batch sees sane inputs
         first = env.reset()
-        policy.normalizer.update(first[obs_key])  # in place: the loss holds these buffers
-        critic_net.normalizer.update(first[critic_key])
+        if warm_actor:
+            policy.normalizer.update(first[obs_key])  # in place: the loss holds these buffers
+        if warm_critic:
+            critic_net.normalizer.update(first[critic_key])
     # The actor is feed-forward: it needs no InitTracker, so the collector leaves the env as it is.
     collector = Collector(
         with_episode_return(env),
