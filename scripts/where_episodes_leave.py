@@ -4,6 +4,8 @@ docs/oracle.md quotes it for the double gyre.
 
     python scripts/where_episodes_leave.py double_gyre generalist_student generalist_teacher head_to_target
     python scripts/where_episodes_leave.py double_gyre generalist_student --episodes 1000
+    python scripts/where_episodes_leave.py double_gyre blind --episodes 200 \
+        --set '+policies.blind={scripted: oracle, obs: geo, settings: {knows_walls: false}}'
 """
 
 from __future__ import annotations
@@ -30,9 +32,10 @@ def faces(final: Tensor, lo, hi) -> dict[str, int]:
     return out
 
 
-def leaving(case: str, policies: list[str], episodes: int) -> dict[str, dict]:
-    """Per policy: episodes, successes, episodes that leave, by face, and their median time of leaving."""
-    suite = Suite(compose_config(["+experiment=generalization"], app="evaluate"))
+def leaving(case: str, policies: list[str], episodes: int, overrides: tuple[str, ...] = ()) -> dict[str, dict]:
+    """Per policy: episodes, successes, episodes that leave, by face, and their median time of leaving.
+    ``overrides``: Hydra overrides of the suite's config (a policy defined on the command line)."""
+    suite = Suite(compose_config(["+experiment=generalization", *overrides], app="evaluate"))
     cfg = suite.cfg.suite.generalization.cases[case]
     flow = suite.flow(OmegaConf.to_container(cfg.flow, resolve=True))
     spec = EvalSpec(flow, build_task(cfg.task, flow), suite.cfg.env, episodes)
@@ -56,9 +59,10 @@ def main() -> None:
     parser.add_argument("case")
     parser.add_argument("policies", nargs="+")
     parser.add_argument("--episodes", type=int, default=4000)
+    parser.add_argument("--set", action="append", default=[], metavar="OVERRIDE", help="a Hydra override (repeatable)")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    for name, r in leaving(args.case, args.policies, args.episodes).items():
+    for name, r in leaving(args.case, args.policies, args.episodes, tuple(args.set)).items():
         print(
             f"{name}: {r['success']} of {r['episodes']} succeed, {r['left']} leave the box {r['faces']}, "
             f"median time of leaving {r['median_time_left']}"

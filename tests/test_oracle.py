@@ -68,6 +68,17 @@ def test_a_planner_that_senses_only_around_the_swimmer_misses_the_detour():
     assert local["success_rate"] == 0.0 and local["failures"]["left_domain"]["rate"] == 1.0
 
 
+def test_a_planner_that_does_not_know_the_walls_is_carried_out_of_the_box():
+    """The detour of the full oracle exists only because of the box's walls: a planner that judges a plan leaving the
+    box as if the domain went on takes the straight crossing and every episode is carried out."""
+    flow = FunctionFlow(cross_current_band, Box((-5.0, -2.0, -2.0), (5.0, 8.0, 2.0)), max_speed=3.0)
+    task = ListTask([[0.0, 0.0, 0.0]], [[0.0, 6.0, 0.0]])
+    blind = success(
+        Oracle(candidates=64, horizon=60, iterations=3, blocks=3, knows_walls=False), flow, task, 8, time_limit=40.0
+    )
+    assert blind["success_rate"] == 0.0 and blind["failures"]["left_domain"]["rate"] == 1.0
+
+
 def passing_band(pos, t):
     """The band of cross_current_band until t = 4, still water after."""
     return cross_current_band(pos, t) * (t < 4.0).to(pos.dtype)[:, None]

@@ -258,3 +258,53 @@ def test_during_the_critic_warmup_only_the_critic_learns(tmp_path):
     run(compose_train(*TINY_PPO, *start, "algo.critic_warmup_frames=256", "algo.total_frames=768"), tmp_path / "after")
     moved, _ = load_policy(tmp_path / "after" / "checkpoints" / "last.pt")
     assert not torch.allclose(moved(obs), student(obs))
+
+
+def test_the_anchor_is_the_kl_to_the_warm_start_at_the_collection_scale(tmp_path):
+    """algo.anchor_coef's term: zero for an actor that acts as its warm start, sum (shift / scale)^2 / 2 when its
+    location outputs are shifted; the anchor is the checkpoint's policy, frozen."""
+    from tensordict import TensorDict
+
+    from flownav.agents.actor_critic import make_actor_critic
+    from flownav.agents.networks import warm_start_state
+    from flownav.algorithms.ppo import anchor_loss, load_anchor
+
+    cfg = make_cfg("algo.actor.hidden=[8]")
+    low, high = torch.tensor([0.0, -0.79, -1.57]), torch.tensor([1.0, 0.79, 1.57])
+    path, _ = _student_file(tmp_path)
+    policy, *_ = make_actor_critic("geo_sincos", "geo_sincos", low, high, cfg.algo.actor, cfg.algo.critic)
+    policy.load_state_dict(warm_start_state(policy, load_checkpoint(path)["policy"]))
+    anchor = load_anchor(str(path), "cpu")
+    assert not any(p.requires_grad for p in anchor.parameters())
+    scale = torch.tensor([0.5, 0.25, 2.0]).expand(64, 3)
+    batch = TensorDict({"geo_sincos": torch.randn(64, 9) * 3, "scale": scale}, batch_size=[64])
+    assert anchor_loss(policy, anchor, batch, "geo_sincos").item() == 0.0
+    with torch.no_grad():
+        policy.net[-1].bias[:3] += torch.tensor([0.1, 0.2, 0.0])
+    expected = (0.1 / 0.5) ** 2 / 2 + (0.2 / 0.25) ** 2 / 2
+    torch.testing.assert_close(anchor_loss(policy, anchor, batch, "geo_sincos"), torch.tensor(expected))
+
+
+def test_an_anchored_warm_start_stays_near_its_student_and_needs_one(tmp_path):
+    """With a strong anchor the actor moves far less from the student than without one over the same updates; an
+    anchor without algo.init_from is refused in one line."""
+    from tiny import TINY_PPO, compose_train
+
+    from flownav.errors import ConfigError
+    from train import run
+
+    path, student = _student_file(tmp_path)
+    start = ["algo.init_from=" + str(path), "algo.update_normalizer=false", "algo.final_eval_episodes=0"]
+    obs = torch.randn(256, 9) * 3
+    moved = {}
+    for coef in (0.0, 100.0):
+        run(compose_train(*TINY_PPO, *start, "algo.total_frames=768", f"algo.anchor_coef={coef}"), tmp_path / str(coef))
+        policy, _ = load_policy(tmp_path / str(coef) / "checkpoints" / "last.pt")
+        moved[coef] = (policy(obs) - student(obs)).abs().mean().item()
+    assert moved[100.0] < 0.5 * moved[0.0]
+    message = (
+        "algo.anchor_coef (1.0) pulls the actor towards algo.init_from's policy: set algo.init_from or "
+        "algo.anchor_coef=0"
+    )
+    with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
+        run(compose_train(*TINY_PPO, "algo.anchor_coef=1.0"), tmp_path / "none")

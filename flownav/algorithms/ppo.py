@@ -48,6 +48,7 @@ LOSSES = {
     "loss/clip_fraction": "clip_fraction",
     "loss/explained_variance": "explained_variance",
     "policy/entropy": "entropy",
+    "loss/anchor": "loss_anchor",
 }
 CHECKED_LOSSES = list(LOSSES)[:3]  # what must stay finite
 
@@ -57,6 +58,11 @@ def check_config(cfg) -> None:
     a = cfg.algo
     if int(a.get("eval_every") or 0) % int(a.log_every):
         raise ConfigError(f"algo.eval_every ({a.eval_every}) must be a multiple of algo.log_every ({a.log_every})")
+    if float(a.get("anchor_coef") or 0) and not a.get("init_from"):
+        raise ConfigError(
+            f"algo.anchor_coef ({a.anchor_coef}) pulls the actor towards algo.init_from's policy: set algo.init_from "
+            "or algo.anchor_coef=0"
+        )
     frames = int(cfg.env.num_envs) * int(a.rollout_steps)
     if a.minibatch_size > frames:
         raise ConfigError(
@@ -72,6 +78,24 @@ def copy_for_evaluation(policy: DeterministicPolicy) -> DeterministicPolicy:
     return copy
 
 
+def load_anchor(path: str, device) -> DeterministicPolicy:
+    """The policy of ``path`` (a DAgger student or a PPO run), frozen: what ``algo.anchor_coef`` pulls towards."""
+    saved = load_checkpoint(path)["policy"]
+    anchor = DeterministicPolicy(**saved["config"])
+    anchor.load_state_dict(saved["state_dict"])
+    return anchor.to(device).requires_grad_(False)
+
+
+def anchor_loss(policy: DeterministicPolicy, anchor: DeterministicPolicy, batch, obs_key: str) -> torch.Tensor:
+    """KL(actor || anchor) of the pre-tanh Gaussians at the actor's scale of collection (detached), averaged over the
+    batch: sum over the action of (loc - anchor's loc)^2 / (2 scale^2). It keeps what the anchor does where PPO's
+    advantages do not say otherwise, and costs nothing where the actor does what the anchor does."""
+    obs = batch[obs_key]
+    n = policy.action_dim
+    shift = (policy.outputs(obs)[..., :n] - anchor.outputs(obs)[..., :n]) / batch["scale"]
+    return (shift**2 / 2).sum(-1).mean()
+
+
 def train(cfg, run_dir) -> dict:
     run_dir = Path(run_dir)
     check_config(cfg)
@@ -82,6 +106,7 @@ def train(cfg, run_dir) -> dict:
     n_minibatches = frames_per_batch // int(a.minibatch_size)
     eval_every, eval_episodes = int(a.get("eval_every") or 0), int(a.get("eval_episodes") or 0)
     critic_warmup = int(a.get("critic_warmup_frames") or 0)
+    anchor_coef = float(a.get("anchor_coef") or 0)
     role = str(cfg.get("role") or ("teacher" if obs_key in GEO_VIEWS else "baseline"))
     figure_episodes = int(cfg.logger.get("figure_episodes") or 0)  # trajectories drawn at each periodic evaluation
 
@@ -134,6 +159,7 @@ def train(cfg, run_dir) -> dict:
         if payload.get("train_state") and "critic" in payload["train_state"]:  # else (a DAgger student) a fresh critic
             critic_net.load_state_dict(payload["train_state"]["critic"])
             warm_critic = False
+    anchor = load_anchor(str(a.init_from), device) if anchor_coef else None  # on a resume too: the same policy
     if warm_actor or warm_critic:  # so the first batch sees sane inputs
         first = env.reset()
         if warm_actor:
@@ -202,10 +228,14 @@ def train(cfg, run_dir) -> dict:
                         adv_module(data)
                 buffer.extend(data.reshape(-1))
                 for _ in range(n_minibatches):
-                    loss = loss_module(buffer.sample())
+                    batch = buffer.sample()
+                    loss = loss_module(batch)
                     total = loss["loss_critic"]
                     if frames > critic_warmup:  # a warm-started actor waits for the critic's advantages
                         total = total + loss["loss_objective"] + loss.get("loss_entropy", 0.0)
+                        if anchor is not None:
+                            loss["loss_anchor"] = anchor_coef * anchor_loss(policy, anchor, batch, obs_key)
+                            total = total + loss["loss_anchor"]
                     optim.zero_grad(set_to_none=True)
                     total.backward()
                     loss["grad_norm"] = nn.utils.clip_grad_norm_(loss_module.parameters(), float(a.max_grad_norm))

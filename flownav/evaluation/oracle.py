@@ -22,11 +22,13 @@ Cost of a candidate (lower is better):
                                                             (minimum image on periodic axes)
 Steps past the episode's time limit count for nothing.
 
-What the planner knows (``forecast``, ``sensing_radius``): by default the true flow everywhere and at every future
-time. With ``forecast=False`` it plans in the flow frozen at the time of planning (a snapshot, no forecast); with a
-``sensing_radius`` R it knows the flow only within R of the swimmer at planning time (minimum image) and assumes the
-flow it feels there everywhere beyond. The env moves the swimmer in the true flow either way: what a navigator
-with that much knowledge of the flow could plan by this search, the references of a policy that senses less than all.
+What the planner knows (``forecast``, ``sensing_radius``, ``knows_walls``): by default the true flow everywhere and
+at every future time. With ``forecast=False`` it plans in the flow frozen at the time of planning (a snapshot, no
+forecast); with a ``sensing_radius`` R it knows the flow only within R of the swimmer at planning time (minimum
+image) and assumes the flow it feels there everywhere beyond. With ``knows_walls=False`` it does not know where the
+domain ends (an ego view has no position): a plan that leaves the domain is judged as if the domain went on. The env
+moves the swimmer in the true flow either way: what a navigator with that much knowledge of the flow could plan by
+this search, the references of a policy that senses less than all.
 """
 
 from __future__ import annotations
@@ -54,6 +56,7 @@ class OracleSettings:
     leave_penalty: float = 1000.0
     forecast: bool = True  # plans in the flow as it will be; False: in the flow frozen at planning time
     sensing_radius: float | None = None  # known flow within this distance of the swimmer; None: everywhere
+    knows_walls: bool = True  # False: a plan that leaves the domain costs nothing extra (obstacles still do)
     seed: int = 0
 
     def __post_init__(self):
@@ -178,7 +181,10 @@ class Oracle:
             if s.sensing_radius is not None:
                 unseen = env.flow.displacement(here, pos).norm(dim=-1) > s.sensing_radius
                 flow_vel = torch.where(unseen[:, None], felt, flow_vel)
-            out = live & ~reached & (~env.flow.in_domain(pos) | in_obstacle(env.flow, pos, rep))
+            blocked = in_obstacle(env.flow, pos, rep)
+            if s.knows_walls:
+                blocked = blocked | ~env.flow.in_domain(pos)
+            out = live & ~reached & blocked
             t = (h + 1) * env.dt
             cost = torch.where(reached, t - s.reach_bonus, cost)
             cost = torch.where(out, s.leave_penalty - t, cost)
