@@ -191,3 +191,6 @@ def test_where_episodes_leave_counts_each_face_of_the_box():
     r = script.leaving("double_gyre", ["head_to_target"], 200)["head_to_target"]
     assert r["episodes"] == 200 and r["faces"]["-z"] == r["faces"]["+z"] == 0
     assert r["left"] == sum(r["faces"].values())  # every episode that leaves lies beyond exactly one face
+    # --set: a policy defined on the command line runs on the same episodes
+    defined = ("+policies.straight={scripted: head_to_target, obs: geo}",)
+    assert script.leaving("double_gyre", ["straight"], 200, defined)["straight"] == r
