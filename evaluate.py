@@ -177,8 +177,10 @@ def run_paper(cfg: DictConfig, log=print) -> dict:
     prov = provenance(cmd)
     t0 = time.time()
     results = run_suite(cfg, log=log)
-    data = merge_results(resolve(str(cfg.results)), results, prov, log=log)
-    report = write_report(data, resolve(str(cfg.report)), cmd, seconds=time.time() - t0, commit=prov["commit"])
+    results_path = resolve(str(cfg.results))
+    data = merge_results(results_path, results, prov, log=log)
+    report_path = resolve(str(cfg.report))
+    report = write_report(data, report_path, cmd, seconds=time.time() - t0, commit=prov["commit"], results=results_path)
     log(f"wrote {cfg.results} and {report} in {time.time() - t0:.1f} s")
     return results
 

@@ -435,6 +435,9 @@ def test_report_puts_the_paper_next_to_ours(tmp_path):
     assert "python evaluate.py +experiment=paper_training" in text and "+experiment=teacher" in text
     assert "Student in the training flow: 90.00% -> NOT met" in text
     assert json.loads((tmp_path / "paper.json").read_text())["experiments"]["training"]["provenance"]["commit"]
+    # a run's report names its own results file, beside it
+    beside = write_report(data, tmp_path / "REPORT.md", "python evaluate.py", results=tmp_path / "paper.json")
+    assert "Machine-readable results: `paper.json`." in beside.read_text()
 
 
 def test_the_performance_goal_counts_only_the_papers_experiments(tmp_path):

@@ -127,17 +127,26 @@ def _performance(seconds: float | None, exps: dict) -> list[str]:
     return lines + [""]
 
 
-def write_report(data: dict, path: Path, command: str, seconds: float | None = None, commit: str | None = None) -> Path:
-    """REPORT.md from the merged results (every experiment run so far); ``commit``: the code that ran (default HEAD)."""
+def write_report(
+    data: dict,
+    path: Path,
+    command: str,
+    seconds: float | None = None,
+    commit: str | None = None,
+    results: Path | None = None,
+) -> Path:
+    """REPORT.md from the merged results (every experiment run so far); ``commit``: the code that ran (default HEAD);
+    ``results``: the file they are in (default: results/paper.json), named relative to the report."""
     path = Path(path)
     report_dir = path.parent
+    results_name = os.path.relpath(results or REPO_ROOT / "results" / "paper.json", report_dir)
     exps = data.get("experiments", {})
     lines = [
         "# flownav: the paper's experiments, reproduced",
         "",
         "Written by `python evaluate.py +experiment=paper` (flownav/evaluation/report.py); this run: "
         f"`{command}` at commit `{commit or git_commit()}`, {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC. "
-        "Machine-readable results: `results/paper.json`. How to run each experiment: `docs/evaluation.md`.",
+        f"Machine-readable results: `{results_name}`. How to run each experiment: `docs/evaluation.md`.",
         "",
         "Success rates carry Wilson 95% intervals; every episode is deterministic (policy mean action), one "
         "episode per env slot, no auto-reset. A table marked *skipped* names the command that produces what it "
@@ -166,7 +175,7 @@ def main(argv=None) -> None:
     p.add_argument("--report", default=str(REPO_ROOT / "REPORT.md"))
     a = p.parse_args(argv)
     data = json.loads(Path(a.results).read_text())
-    print(write_report(data, Path(a.report), "python -m flownav.evaluation.report"))
+    print(write_report(data, Path(a.report), "python -m flownav.evaluation.report", results=Path(a.results)))
 
 
 if __name__ == "__main__":
