@@ -1,6 +1,6 @@
 """Through which face of the box the episodes of a generalisation-suite case leave it, per policy: the protocol's
 episodes of ``+experiment=generalization``'s case, counted by the face their final position lies beyond.
-docs/oracle.md quotes it for the double gyre.
+docs/oracle.md quotes it for the double gyre, and for the planner without the walls on the zoo's cases.
 
     python scripts/where_episodes_leave.py double_gyre generalist_student generalist_teacher head_to_target
     python scripts/where_episodes_leave.py double_gyre generalist_student --episodes 1000

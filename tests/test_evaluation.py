@@ -521,6 +521,7 @@ def test_provenance_is_the_code_before_the_run(tiny_world, monkeypatch, tmp_path
     )
     text = (tmp_path / "REPORT.md").read_text()
     assert "at commit `abc123`" in text and "dirty" not in text
+    assert "Machine-readable results: `paper.json`." in text  # the run's own results file, beside the report
 
 
 def test_scripted_references_run_without_checkpoints(tiny_world):

@@ -252,6 +252,45 @@ def test_ppo_resumes_bit_for_bit_after_a_failure(tmp_path, monkeypatch):
     assert not (tmp_path / "unused").exists()
 
 
+def test_an_anchored_ppo_run_resumes_bit_for_bit_and_only_with_its_anchor(tmp_path, monkeypatch):
+    """algo.anchor_coeff: the anchor is reloaded from algo.init_from on a resume, so the run continues exactly; a
+    different file at that path is refused in one line."""
+    import shutil
+
+    import train
+    from flownav.algorithms import ppo
+    from flownav.provenance import sha256
+
+    train.run(compose_train(*PPO_TINY, "algo.total_frames=2048"), tmp_path / "start")
+    anchor = tmp_path / "anchor.pt"
+    shutil.copy(tmp_path / "start" / "checkpoints" / "last.pt", anchor)
+    anchored = ("algo.total_frames=6144", f"algo.init_from={anchor}", "algo.anchor_coeff=1.0")  # 3 iterations
+    train.run(compose_train(*PPO_TINY, *anchored), tmp_path / "straight")
+    with monkeypatch.context() as m:
+        interrupt_at(m, ppo, 2)
+        with pytest.raises(Interrupt):
+            train.run(compose_train(*PPO_TINY, *anchored), tmp_path / "part")
+    resume = compose_train(*PPO_TINY, *anchored, f"resume={tmp_path / 'part'}")
+    started = sha256(anchor)
+    shutil.copy(tmp_path / "straight" / "checkpoints" / "last.pt", anchor)
+    message = (
+        f"algo.init_from={anchor} is not the file this run was anchored to (sha256 {started} there, "
+        f"{sha256(anchor)} here): restore that file, or start a new run"
+    )
+    with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
+        train.run(resume, tmp_path / "unused")
+    shutil.copy(tmp_path / "start" / "checkpoints" / "last.pt", anchor)
+    train.run(resume, tmp_path / "unused")
+    a, b = tmp_path / "straight" / "checkpoints" / "last.pt", tmp_path / "part" / "checkpoints" / "last.pt"
+    assert max_weight_difference(a, b) == 0.0
+    assert train_rows(tmp_path / "straight" / "metrics.csv") == train_rows(tmp_path / "part" / "metrics.csv")
+    pulls = []
+    for run in ("straight", "part"):
+        with open(tmp_path / run / "metrics.csv", newline="") as f:
+            pulls.append([float(r["loss/anchor"]) for r in csv.DictReader(f)])
+    assert len(pulls[0]) == 3 and pulls[0] == pulls[1] and all(p > 0 for p in pulls[0])
+
+
 def test_dagger_resumes_bit_for_bit_after_a_failure(teacher_ckpt, tmp_path, monkeypatch):
     import train
     from flownav.algorithms import dagger

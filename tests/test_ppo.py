@@ -261,7 +261,7 @@ def test_during_the_critic_warmup_only_the_critic_learns(tmp_path):
 
 
 def test_the_anchor_is_the_kl_to_the_warm_start_at_the_collection_scale(tmp_path):
-    """algo.anchor_coef's term: zero for an actor that acts as its warm start, sum (shift / scale)^2 / 2 when its
+    """algo.anchor_coeff's term: zero for an actor that acts as its warm start, sum (shift / scale)^2 / 2 when its
     location outputs are shifted; the anchor is the checkpoint's policy, frozen."""
     from tensordict import TensorDict
 
@@ -274,7 +274,7 @@ def test_the_anchor_is_the_kl_to_the_warm_start_at_the_collection_scale(tmp_path
     path, _ = _student_file(tmp_path)
     policy, *_ = make_actor_critic("geo_sincos", "geo_sincos", low, high, cfg.algo.actor, cfg.algo.critic)
     policy.load_state_dict(warm_start_state(policy, load_checkpoint(path)["policy"]))
-    anchor = load_anchor(str(path), "cpu")
+    anchor, _ = load_anchor(str(path), "geo_sincos", "cpu", None)
     assert not any(p.requires_grad for p in anchor.parameters())
     scale = torch.tensor([0.5, 0.25, 2.0]).expand(64, 3)
     batch = TensorDict({"geo_sincos": torch.randn(64, 9) * 3, "scale": scale}, batch_size=[64])
@@ -298,13 +298,14 @@ def test_an_anchored_warm_start_stays_near_its_student_and_needs_one(tmp_path):
     obs = torch.randn(256, 9) * 3
     moved = {}
     for coef in (0.0, 100.0):
-        run(compose_train(*TINY_PPO, *start, "algo.total_frames=768", f"algo.anchor_coef={coef}"), tmp_path / str(coef))
+        cfg = compose_train(*TINY_PPO, *start, "algo.total_frames=768", f"algo.anchor_coeff={coef}")
+        run(cfg, tmp_path / str(coef))
         policy, _ = load_policy(tmp_path / str(coef) / "checkpoints" / "last.pt")
         moved[coef] = (policy(obs) - student(obs)).abs().mean().item()
     assert moved[100.0] < 0.5 * moved[0.0]
     message = (
-        "algo.anchor_coef (1.0) pulls the actor towards algo.init_from's policy: set algo.init_from or "
-        "algo.anchor_coef=0"
+        "algo.anchor_coeff (1.0) pulls the actor towards algo.init_from's policy: set algo.init_from or "
+        "algo.anchor_coeff=0"
     )
     with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
-        run(compose_train(*TINY_PPO, "algo.anchor_coef=1.0"), tmp_path / "none")
+        run(compose_train(*TINY_PPO, "algo.anchor_coeff=1.0"), tmp_path / "none")

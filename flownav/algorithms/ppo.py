@@ -28,12 +28,14 @@ from flownav.agents.actor_critic import make_actor_critic
 from flownav.agents.networks import DeterministicPolicy, warm_start_state
 from flownav.algorithms.common import eval_metrics, require_finite_update
 from flownav.builders import build_env, build_flow, build_task
-from flownav.checkpoint import RunCheckpoints, load_checkpoint, load_resume_checkpoint
+from flownav.checkpoint import RunCheckpoints, load_checkpoint, load_policy, load_resume_checkpoint
 from flownav.devices import check_on_device, resolve_device
 from flownav.envs.observations import GEO_VIEWS
 from flownav.episode_window import EpisodeWindow, resume_episodes, with_episode_return
 from flownav.errors import ConfigError
 from flownav.evaluation.protocol import EvalSpec, evaluate
+from flownav.paths import resolve
+from flownav.provenance import sha256
 from flownav.runlog import RunLogger, run_summary
 from flownav.viz.dashboard import eval_trajectories_figure
 
@@ -58,10 +60,10 @@ def check_config(cfg) -> None:
     a = cfg.algo
     if int(a.get("eval_every") or 0) % int(a.log_every):
         raise ConfigError(f"algo.eval_every ({a.eval_every}) must be a multiple of algo.log_every ({a.log_every})")
-    if float(a.get("anchor_coef") or 0) and not a.get("init_from"):
+    if float(a.get("anchor_coeff") or 0) and not a.get("init_from"):
         raise ConfigError(
-            f"algo.anchor_coef ({a.anchor_coef}) pulls the actor towards algo.init_from's policy: set algo.init_from "
-            "or algo.anchor_coef=0"
+            f"algo.anchor_coeff ({a.anchor_coeff}) pulls the actor towards algo.init_from's policy: set algo.init_from "
+            "or algo.anchor_coeff=0"
         )
     frames = int(cfg.env.num_envs) * int(a.rollout_steps)
     if a.minibatch_size > frames:
@@ -78,12 +80,19 @@ def copy_for_evaluation(policy: DeterministicPolicy) -> DeterministicPolicy:
     return copy
 
 
-def load_anchor(path: str, device) -> DeterministicPolicy:
-    """The policy of ``path`` (a DAgger student or a PPO run), frozen: what ``algo.anchor_coef`` pulls towards."""
-    saved = load_checkpoint(path)["policy"]
-    anchor = DeterministicPolicy(**saved["config"])
-    anchor.load_state_dict(saved["state_dict"])
-    return anchor.to(device).requires_grad_(False)
+def load_anchor(path: str, obs_key: str, device, resumed: dict | None) -> tuple[DeterministicPolicy, str]:
+    """The policy of ``path`` (a DAgger student or a PPO run), frozen, and the file's sha256: what
+    ``algo.anchor_coeff`` pulls towards. A resumed run refuses another file than the one it started with."""
+    digest = sha256(resolve(path))
+    started = (resumed or {}).get("train_state", {}).get("anchor_sha256")
+    if resumed is not None and started != digest:
+        raise ConfigError(
+            f"algo.init_from={path} is not the file this run was anchored to (sha256 {started} there, {digest} "
+            "here): restore that file, or start a new run"
+        )
+    with torch.random.fork_rng(devices=[]):  # building the network must not move the run's seeded draws
+        anchor, _ = load_policy(resolve(path), expect_obs=obs_key, device=device)
+    return anchor, digest
 
 
 def anchor_loss(policy: DeterministicPolicy, anchor: DeterministicPolicy, batch, obs_key: str) -> torch.Tensor:
@@ -106,7 +115,7 @@ def train(cfg, run_dir) -> dict:
     n_minibatches = frames_per_batch // int(a.minibatch_size)
     eval_every, eval_episodes = int(a.get("eval_every") or 0), int(a.get("eval_episodes") or 0)
     critic_warmup = int(a.get("critic_warmup_frames") or 0)
-    anchor_coef = float(a.get("anchor_coef") or 0)
+    anchor_coeff = float(a.get("anchor_coeff") or 0)
     role = str(cfg.get("role") or ("teacher" if obs_key in GEO_VIEWS else "baseline"))
     figure_episodes = int(cfg.logger.get("figure_episodes") or 0)  # trajectories drawn at each periodic evaluation
 
@@ -159,7 +168,7 @@ def train(cfg, run_dir) -> dict:
         if payload.get("train_state") and "critic" in payload["train_state"]:  # else (a DAgger student) a fresh critic
             critic_net.load_state_dict(payload["train_state"]["critic"])
             warm_critic = False
-    anchor = load_anchor(str(a.init_from), device) if anchor_coef else None  # on a resume too: the same policy
+    anchor, anchor_sha256 = load_anchor(str(a.init_from), obs_key, device, resumed) if anchor_coeff else (None, None)
     if warm_actor or warm_critic:  # so the first batch sees sane inputs
         first = env.reset()
         if warm_actor:
@@ -203,6 +212,7 @@ def train(cfg, run_dir) -> dict:
             window=window.state_dict(),
             time_to_target=time_to_target,
             sampler=buffer.sampler.state_dict(),
+            anchor_sha256=anchor_sha256,
         )
 
     # ---- the loop: collect, update, log, evaluate, checkpoint
@@ -234,7 +244,7 @@ def train(cfg, run_dir) -> dict:
                     if frames > critic_warmup:  # a warm-started actor waits for the critic's advantages
                         total = total + loss["loss_objective"] + loss.get("loss_entropy", 0.0)
                         if anchor is not None:
-                            loss["loss_anchor"] = anchor_coef * anchor_loss(policy, anchor, batch, obs_key)
+                            loss["loss_anchor"] = anchor_coeff * anchor_loss(policy, anchor, batch, obs_key)
                             total = total + loss["loss_anchor"]
                     optim.zero_grad(set_to_none=True)
                     total.backward()
