@@ -97,6 +97,18 @@ def _memory() -> list[dict]:
     return out
 
 
+def _gradient() -> list[dict]:
+    return [
+        {
+            "name": f"dflow_{i}_d{j}",
+            "meaning": f"change of the local flow's {i} component along the body's {j} axis (body frame)",
+            "units": "1/T",
+        }
+        for i in _BODY
+        for j in _BODY
+    ]
+
+
 VIEW_INPUTS = {
     "geo": lambda: _geo(_VELOCITY, sincos=False),
     "geo_flow": lambda: _geo(_FLOW, sincos=False),
@@ -107,6 +119,7 @@ VIEW_INPUTS = {
     "ego_up": lambda: [*_ego(_VELOCITY), *_UP],
     "ego_mem": lambda: [*_ego(_VELOCITY), *_UP, *_memory()],
     "ego_mem_speed": lambda: [*_ego(_VELOCITY), *_UP, *_memory(), _SWIM_SPEED],
+    "ego_mem_grad": lambda: [*_ego(_VELOCITY), *_UP, *_memory(), *_gradient()],
 }
 
 

@@ -127,14 +127,28 @@ def test_ego_views_are_invariant_under_rotation_of_the_scene(phi, seed):
     psi = (torch.rand(n, generator=g, dtype=torch.float64) * 2 - 1) * math.pi / 2
     history = torch.randn(n, HISTORY_LEN, 3, generator=g, dtype=torch.float64)
     speed = torch.rand(n, generator=g, dtype=torch.float64)
-    views = ("geo", "ego", "ego_flow", "ego_up", "ego_mem", "ego_mem_speed")
+    grad = torch.randn(n, 3, 3, generator=g, dtype=torch.float64)
+    views = ("geo", "ego", "ego_flow", "ego_up", "ego_mem", "ego_mem_speed", "ego_mem_grad")
     frame = body_frame(theta, psi)
-    before = compute_views(State(to_target, vel, flow, theta, psi, frame, history, swim_speed=speed), views)
+    before = compute_views(
+        State(to_target, vel, flow, theta, psi, frame, history, swim_speed=speed, flow_gradient=grad), views
+    )
     r = lambda v: rotate_z(v, phi)  # noqa: E731
     turned = body_frame(theta + phi, psi)
-    rotated = State(r(to_target), r(vel), r(flow), theta + phi, psi, turned, r(history), swim_speed=speed)
+    turn = rotate_z(torch.eye(3, dtype=torch.float64), phi).T  # columns: the turned inertial axes
+    rotated = State(
+        r(to_target),
+        r(vel),
+        r(flow),
+        theta + phi,
+        psi,
+        turned,
+        r(history),
+        swim_speed=speed,
+        flow_gradient=turn @ grad @ turn.T,  # the gradient of the turned flow
+    )
     after = compute_views(rotated, views)
-    for view in ("ego", "ego_flow", "ego_up", "ego_mem", "ego_mem_speed"):
+    for view in ("ego", "ego_flow", "ego_up", "ego_mem", "ego_mem_speed", "ego_mem_grad"):
         assert torch.allclose(before[view], after[view], atol=1e-12), view
     if abs(math.sin(phi / 2)) > 1e-3:  # any rotation but the identity moves the geo view
         assert not torch.allclose(before["geo"], after["geo"], atol=1e-6)
@@ -372,6 +386,19 @@ def test_ego_up_is_the_vertical_in_the_body_frame():
     view = compute_views(State(zeros, zeros, zeros, theta, psi, frame), ("ego_up",))["ego_up"]
     assert view.shape == (32, 8) and torch.allclose(up[:, 1], torch.zeros(32, dtype=torch.float64), atol=1e-12)
     assert torch.allclose(view[:, 6:], up[:, [0, 2]], atol=1e-12)
+
+
+def test_ego_mem_grad_reads_a_linear_flows_gradient_in_the_body_frame():
+    """In u = A x the gradient is A everywhere: ego_mem_grad is ego_mem followed by F^T A F (row-major), F the body
+    axes, for every heading."""
+    A = torch.tensor([[0.1, -0.3, 0.0], [0.2, 0.05, 0.4], [-0.1, 0.0, -0.15]])
+    flow = FunctionFlow(lambda p, t: p @ A.T, bounds=BIG, max_speed=100.0)
+    env = NavigationEnv(flow, num_envs=16, views=("ego_mem", "ego_mem_grad"), seed=3)
+    td = env.reset()
+    frame = body_frame(env.theta, env.psi)
+    expected = (frame.transpose(-1, -2) @ A @ frame).flatten(1)
+    assert torch.equal(td["ego_mem_grad"][:, :-9], td["ego_mem"])
+    assert torch.allclose(td["ego_mem_grad"][:, -9:], expected, atol=1e-4)
 
 
 def test_ego_mem_remembers_the_flow_every_stride_steps_in_the_current_body_frame():

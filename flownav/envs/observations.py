@@ -17,6 +17,11 @@
   speed times its speed factor): what a robot knows of its own propulsion. Where the families draw weak swimmers
   the same flow calls for another action at another U, and without it an ego student cannot tell which. (The
   generalist recipe with it was no better: docs/generalist_variants.md.)
+* ``ego_mem_grad`` (17 + 3 K, ours): ``ego_mem`` plus the flow's gradient in the body frame, F^T G F (9, row-major:
+  d u_body_i / d x_body_j), what a lateral-line-like array of flow sensors reads: how the flow changes around the
+  swimmer, not only where it is. G is the privileged views' forward-difference gradient (along the inertial axes), so
+  under a rotation of the scene about z this view agrees to the accuracy of those differences, not exactly as the
+  other ego views do. (Measured, not shipped: docs/generalist_variants.md.)
 * ``geo_sincos`` (9, ours): ``geo`` with theta as (cos theta, sin theta). theta wraps at +-pi, which is
   heading straight upstream, the very heading of the wake crossing; the angle jumps there and the
   pair does not. Same information as ``geo``. ``geo_flow_sincos``: the same for ``geo_flow`` (SI 1).
@@ -44,7 +49,8 @@
   left (what decides truncation, hence the value) and the flow velocity at the target.
 
 Sensor noise (``env.sensor_noise``, off by default) applies to the ego views only, the swimmer's on-board
-sensors (``SENSED_VIEWS``): the geo and privileged views are what the simulator knows, exactly.
+sensors (``SENSED_VIEWS``): the geo and privileged views are what the simulator knows, exactly (so is the gradient
+of ``ego_mem_grad``).
 """
 
 from __future__ import annotations
@@ -100,6 +106,11 @@ def _ego_up(s: State) -> Tensor:
 def _ego_mem(s: State) -> Tensor:
     past = to_body(s.frame, s.flow_history).flatten(1)
     return torch.cat((_ego_up(s), past), -1)
+
+
+def _ego_mem_grad(s: State) -> Tensor:
+    grad = s.frame.transpose(-1, -2) @ s.flow_gradient @ s.frame  # F^T G F: d u_body / d x_body
+    return torch.cat((_ego_mem(s), grad.flatten(1)), -1)
 
 
 def _ego_mem_speed(s: State) -> Tensor:
@@ -158,6 +169,7 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "ego_up": (8, _ego_up),
     "ego_mem": (8 + 3 * HISTORY_LEN, _ego_mem),
     "ego_mem_speed": (9 + 3 * HISTORY_LEN, _ego_mem_speed),
+    "ego_mem_grad": (17 + 3 * HISTORY_LEN, _ego_mem_grad),
     "geo_sincos": (9, lambda s: _geo_sincos(s, s.velocity)),
     "geo_flow_sincos": (9, lambda s: _geo_sincos(s, s.flow)),
     "privileged": (14, _privileged),
@@ -166,10 +178,11 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "geo_priv_scene": (24, _geo_priv_scene),
     "geo_priv_around": (23 + 3 * len(AROUND_OFFSETS), _geo_priv_around),
 }
-MEMORY_VIEWS = ("ego_mem", "ego_mem_speed")
+MEMORY_VIEWS = ("ego_mem", "ego_mem_speed", "ego_mem_grad")
 SENSED_VIEWS = tuple(name for name in VIEWS if name.startswith("ego"))  # on-board sensors: env.sensor_noise
 PHASE_VIEWS = ("privileged",)
-GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic", "geo_priv_scene", "geo_priv_around")  # the gradient, time left
+# The views that read the flow's gradient (the env computes it for them) and the time left.
+GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic", "geo_priv_scene", "geo_priv_around", "ego_mem_grad")
 SWIM_SPEED_VIEWS = (*GRADIENT_VIEWS, "ego_mem_speed")  # the swimmer's own full swim speed
 TARGET_FLOW_VIEWS = ("geo_priv_critic",)
 SCENE_VIEWS = ("geo_priv_scene",)
