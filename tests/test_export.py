@@ -114,3 +114,17 @@ def test_help_lists_every_argument_and_writes_nothing(flag, capsys, tmp_path, mo
     assert out.startswith("usage: python -m flownav.export checkpoint=PATH")
     assert all(f"\n  {key} " in out for key in ARGUMENTS) and all(fmt in out for fmt in FORMATS)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_every_student_view_names_each_of_its_numbers_in_order():
+    """An exported card names one input per number of its view, uniquely, in order: for every view a student or
+    teacher reads (a view added without names, or with one too few, fails here)."""
+    from flownav.algorithms.dagger import STUDENT_VIEWS
+    from flownav.envs.observations import observation_size
+    from flownav.export import VIEW_INPUTS, observation_inputs
+
+    assert set(STUDENT_VIEWS) <= set(VIEW_INPUTS)
+    for view in VIEW_INPUTS:
+        inputs = observation_inputs(view)
+        assert [i["index"] for i in inputs] == list(range(observation_size(view))), view
+        assert len({i["name"] for i in inputs}) == len(inputs), view
