@@ -10,7 +10,7 @@ from pathlib import Path
 
 from flownav.atomic import atomic_write_text
 from flownav.evaluation.kinds import KINDS
-from flownav.paths import REPO_ROOT
+from flownav.paths import REPO_ROOT, RESULTS_DIR
 from flownav.provenance import git_commit
 
 
@@ -127,6 +127,9 @@ def _performance(seconds: float | None, exps: dict) -> list[str]:
     return lines + [""]
 
 
+SHIPPED_RESULTS = RESULTS_DIR / "paper.json"  # what a shipped REPORT.md is written from
+
+
 def write_report(
     data: dict,
     path: Path,
@@ -139,7 +142,7 @@ def write_report(
     ``results``: the file they are in (default: results/paper.json), named relative to the report."""
     path = Path(path)
     report_dir = path.parent
-    results_name = os.path.relpath(results or REPO_ROOT / "results" / "paper.json", report_dir)
+    results_name = os.path.relpath(results or SHIPPED_RESULTS, report_dir)
     exps = data.get("experiments", {})
     lines = [
         "# flownav: the paper's experiments, reproduced",
@@ -171,7 +174,7 @@ def main(argv=None) -> None:
     import argparse
 
     p = argparse.ArgumentParser(description=main.__doc__)
-    p.add_argument("--results", default=str(REPO_ROOT / "results" / "paper.json"))
+    p.add_argument("--results", default=str(SHIPPED_RESULTS))
     p.add_argument("--report", default=str(REPO_ROOT / "REPORT.md"))
     a = p.parse_args(argv)
     data = json.loads(Path(a.results).read_text())
