@@ -26,7 +26,7 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-from flownav.envs.kinematics import body_frame, heading_vector, move, step_reaches, turn, wrap_angle
+from flownav.envs.kinematics import body_frame, heading_vector, move, step_reaches, to_body, turn, wrap_angle
 from flownav.envs.observations import (
     AROUND_OFFSETS,
     HISTORY_LEN,
@@ -36,6 +36,7 @@ from flownav.envs.observations import (
     compute_views,
     needs_around,
     needs_body_frame,
+    needs_body_gradient,
     needs_gradient,
     needs_history,
     needs_phase,
@@ -55,7 +56,7 @@ from flownav.flows.transforms import RotatedFlow, rotate_z
 DTHETA_MAX = math.pi / 4
 DPSI_MAX = math.pi / 2
 FLOW_FIX = "the flow must be finite over the whole domain (a FunctionFlow's function, a dataset's frames)"
-# Forward-difference step of the privileged views' flow gradient (below the wake grid's spacing 0.25).
+# Forward-difference step of the flow gradient the views read (below the wake grid's spacing 0.25).
 GRADIENT_STEP = 0.05
 
 
@@ -126,6 +127,7 @@ class Swimmers:
     ring_ptr: int
     swim_scale: Tensor  # [B] the factor on the action's speed (settings.swim_speed_scale times the task's draw)
     flow_grad: Tensor  # [B, 3, 3] du_i / dx_j (privileged views)
+    body_flow_grad: Tensor  # [B, 3, 3] d u_body_i / d x_body_j, differences along the body axes (ego_mem_grad)
     target_flow: Tensor  # [B, 3] the flow at the target (privileged critic)
     flow_around: Tensor  # [B, P, 3] the flow at AROUND_OFFSETS from the swimmer (geo_priv_around)
     scene: Tensor  # [B] int64 the episode's paper-scene code (:func:`paper_scene`; the scene view), set at reset
@@ -184,6 +186,7 @@ def initial_state(num_envs: int, settings: Settings, device) -> Swimmers:
         ring_ptr=0,
         swim_scale=torch.full((num_envs,), settings.swim_speed_scale, device=device),
         flow_grad=z(3, 3),
+        body_flow_grad=z(3, 3),
         target_flow=z(3),
         flow_around=z(len(AROUND_OFFSETS), 3),
         scene=torch.zeros(num_envs, dtype=torch.int64, device=device),
@@ -279,7 +282,7 @@ def reset(state: Swimmers, idx: Tensor, flow: FlowField, settings: Settings, rng
         strength = put(strength, ep.strength)
     if hasattr(settings.task, "swim_speed"):  # drawn last: tasks without it keep their random streams
         swim_scale = put(swim_scale, settings.swim_speed_scale * settings.task.swim_speed(idx.numel(), rng, rng.device))
-    flow_vel, privileged = sense_flow(flow, settings, strength, ep.start, ep.t0, ep.target, idx)
+    flow_vel, privileged = sense_flow(flow, settings, strength, ep.start, ep.t0, ep.target, ep.theta, ep.psi, idx)
     require_finite(flow_vel, "the flow velocity at the start", FLOW_FIX, ep.start)
     d = flow.displacement(ep.start, ep.target).norm(dim=-1)
     zero, zero_int = torch.zeros_like(d), torch.zeros_like(idx)
@@ -349,7 +352,9 @@ def step(
     pos = flow.wrap(moved)  # periodic axes: back into the box
     steps = state.steps + 1
     time = steps * settings.dt
-    flow_vel, privileged = sense_flow(flow, settings, state.strength, pos, state.t0 + time, state.target)
+    flow_vel, privileged = sense_flow(
+        flow, settings, state.strength, pos, state.t0 + time, state.target, theta, psi
+    )
     require_finite(flow_vel, "the flow velocity", FLOW_FIX, pos)
     error = state.sensor_error
     if settings.noisy:
@@ -394,28 +399,54 @@ def step(
 
 
 def sense_flow(
-    flow: FlowField, settings: Settings, strength: Tensor, pos: Tensor, t: Tensor, target: Tensor, idx=None
+    flow: FlowField,
+    settings: Settings,
+    strength: Tensor,
+    pos: Tensor,
+    t: Tensor,
+    target: Tensor,
+    theta: Tensor,
+    psi: Tensor,
+    idx=None,
 ) -> tuple[Tensor, dict[str, Tensor]]:
-    """The flow velocity the swimmers feel at ``pos`` (all slots, or the slots ``idx``) and, for the privileged
-    views, what only the simulator knows: the flow's gradient by forward differences from it (``flow_grad``),
-    the flow at ``target`` (``target_flow``) and at :data:`AROUND_OFFSETS` from ``pos`` (``flow_around``); ``{}``
-    when no view asks. One look-up of 1, 4, 5 or 16-17 points per swimmer: a family's per-call cost is paid once."""
-    if not needs_gradient(settings.views):
+    """The flow velocity the swimmers feel at ``pos`` (all slots, or the slots ``idx``) and what the views ask for
+    beyond it: for the privileged views, what only the simulator knows: the flow's gradient by forward differences
+    along the inertial axes (``flow_grad``), the flow at ``target`` (``target_flow``) and at :data:`AROUND_OFFSETS`
+    from ``pos`` (``flow_around``); for ``ego_mem_grad`` the gradient by forward differences along the body axes of
+    heading ``theta``, ``psi``, in body components (``body_flow_grad``); ``{}`` when no view asks. One look-up of
+    1, 4, 5, 7 or 16-20 points per swimmer: a family's per-call cost is paid once."""
+    views = settings.views
+    inertial, body = needs_gradient(views), needs_body_gradient(views)
+    if not (inertial or body):
         return flow_at(flow, settings, strength, pos, t, idx), {}
-    target_flow, around = needs_target_flow(settings.views), needs_around(settings.views)
+    target_flow, around = inertial and needs_target_flow(views), inertial and needs_around(views)
     n = pos.shape[0]
     slots = torch.arange(n, device=pos.device) if idx is None else idx
-    shifted = pos[None] + torch.eye(3, device=pos.device)[:, None] * GRADIENT_STEP  # [3 (j), n, 3]: + h e_j
-    parts = [pos[None], shifted, target[None]] if target_flow else [pos[None], shifted]
+    parts = [pos[None]]
+    if inertial:
+        parts.append(pos[None] + torch.eye(3, device=pos.device)[:, None] * GRADIENT_STEP)  # [3 (j), n, 3]: + h e_j
+    if target_flow:
+        parts.append(target[None])
     if around:
         parts.append(pos[None] + pos.new_tensor(AROUND_OFFSETS)[:, None])  # [P, n, 3]
+    if body:
+        frame = body_frame(theta, psi)  # columns: the body axes
+        parts.append(pos[None] + frame.permute(2, 0, 1) * GRADIENT_STEP)  # [3 (j), n, 3]: + h b_j
     points = torch.cat(parts)
     rows = points.shape[0]
     u = flow_at(flow, settings, strength, points.reshape(-1, 3), t.repeat(rows), slots.repeat(rows)).view(rows, n, 3)
-    grad = ((u[1:4] - u[0]) / GRADIENT_STEP).permute(1, 2, 0)  # [n, i (component), j (d/dx_j)]
-    out = {"flow_grad": grad} | ({"target_flow": u[4]} if target_flow else {})
+    out, row = {}, 1
+    if inertial:
+        out["flow_grad"] = ((u[1:4] - u[0]) / GRADIENT_STEP).permute(1, 2, 0)  # [n, i (component), j (d/dx_j)]
+        row = 4
+    if target_flow:
+        out["target_flow"], row = u[row], row + 1
     if around:
-        out["flow_around"] = u[rows - len(AROUND_OFFSETS) :].transpose(0, 1)  # [n, P, 3]
+        out["flow_around"] = u[row : row + len(AROUND_OFFSETS)].transpose(0, 1)  # [n, P, 3]
+        row += len(AROUND_OFFSETS)
+    if body:
+        change = ((u[row : row + 3] - u[0]) / GRADIENT_STEP).transpose(0, 1)  # [n, j (along b_j), inertial]
+        out["body_flow_grad"] = to_body(frame, change).transpose(1, 2)  # [n, i (body component), j]
     return u[0], out
 
 
@@ -430,6 +461,8 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
             "flow_around": state.flow_around,
             "time_left": 1 - state.steps / settings.max_steps,
         }
+    if needs_body_gradient(views):
+        privileged["body_flow_gradient"] = state.body_flow_grad
     if needs_scene(views):
         privileged["paper_scene"] = state.scene.to(state.pos.dtype)
     seen = State(

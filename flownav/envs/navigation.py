@@ -167,9 +167,10 @@ class NavigationEnv(EnvBase):
                 f"the saved env state has {state['num_envs']} swimmers and a memory ring of "
                 f"{tuple(state['flow_ring'].shape)}; this env has {self.num_envs} and {tuple(ring.shape)}"
             )
-        # Env states saved before sensor noise (or geo_priv_around) existed hold no sensor_error (exact sensors,
-        # zeros) or flow_around (no view read it).
-        state = {"sensor_error": self.state.sensor_error, "flow_around": self.state.flow_around} | dict(state)
+        # Env states saved before sensor noise (or geo_priv_around, ego_mem_grad) existed hold no sensor_error
+        # (exact sensors, zeros), flow_around or body_flow_grad (no view read them).
+        keep = ("sensor_error", "flow_around", "body_flow_grad")
+        state = {k: getattr(self.state, k) for k in keep} | dict(state)
         saved = {k: state[k].to(self.device).clone() if torch.is_tensor(state[k]) else state[k] for k in SAVED_FIELDS}
         self.state = core.Swimmers(**saved, scene=self.state.scene)
         if isinstance(self.flow, FlowFamily):

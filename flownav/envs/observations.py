@@ -17,11 +17,11 @@
   speed times its speed factor): what a robot knows of its own propulsion. Where the families draw weak swimmers
   the same flow calls for another action at another U, and without it an ego student cannot tell which. (The
   generalist recipe with it was no better: docs/generalist_variants.md.)
-* ``ego_mem_grad`` (17 + 3 K, ours): ``ego_mem`` plus the flow's gradient in the body frame, F^T G F (9, row-major:
+* ``ego_mem_grad`` (17 + 3 K, ours): ``ego_mem`` plus the flow's gradient in the body frame (9, row-major:
   d u_body_i / d x_body_j), what a lateral-line-like array of flow sensors reads: how the flow changes around the
-  swimmer, not only where it is. G is the privileged views' forward-difference gradient (along the inertial axes), so
-  under a rotation of the scene about z this view agrees to the accuracy of those differences, not exactly as the
-  other ego views do. (Measured, not shipped: docs/generalist_variants.md.)
+  swimmer, not only where it is. Forward differences of step ``GRADIENT_STEP`` along the body axes, so the view
+  turns with the swimmer: under a rotation of the scene about z it is unchanged, as the other ego views are.
+  (Measured, not shipped: docs/generalist_variants.md.)
 * ``geo_sincos`` (9, ours): ``geo`` with theta as (cos theta, sin theta). theta wraps at +-pi, which is
   heading straight upstream, the very heading of the wake crossing; the angle jumps there and the
   pair does not. Same information as ``geo``. ``geo_flow_sincos``: the same for ``geo_flow`` (SI 1).
@@ -78,6 +78,7 @@ class State:
     flow_history: Tensor | None = None  # [N, HISTORY_LEN, 3] past flow velocities, inertial; memory views only
     flow_phase: Tensor | None = None  # [N] flow time / period in [0, 1); None: no period (or not asked for)
     flow_gradient: Tensor | None = None  # [N, 3, 3] du_i / dx_j; privileged views only
+    body_flow_gradient: Tensor | None = None  # [N, 3, 3] d u_body_i / d x_body_j; ego_mem_grad only
     flow_around: Tensor | None = None  # [N, P, 3] the flow at AROUND_OFFSETS from the swimmer; geo_priv_around
     swim_speed: Tensor | None = None  # [N] the swimmer's full swim speed
     time_left: Tensor | None = None  # [N] fraction of the time limit left; privileged views only
@@ -109,8 +110,7 @@ def _ego_mem(s: State) -> Tensor:
 
 
 def _ego_mem_grad(s: State) -> Tensor:
-    grad = s.frame.transpose(-1, -2) @ s.flow_gradient @ s.frame  # F^T G F: d u_body / d x_body
-    return torch.cat((_ego_mem(s), grad.flatten(1)), -1)
+    return torch.cat((_ego_mem(s), s.body_flow_gradient.flatten(1)), -1)
 
 
 def _ego_mem_speed(s: State) -> Tensor:
@@ -182,7 +182,8 @@ MEMORY_VIEWS = ("ego_mem", "ego_mem_speed", "ego_mem_grad")
 SENSED_VIEWS = tuple(name for name in VIEWS if name.startswith("ego"))  # on-board sensors: env.sensor_noise
 PHASE_VIEWS = ("privileged",)
 # The views that read the flow's gradient (the env computes it for them) and the time left.
-GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic", "geo_priv_scene", "geo_priv_around", "ego_mem_grad")
+GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic", "geo_priv_scene", "geo_priv_around")
+BODY_GRADIENT_VIEWS = ("ego_mem_grad",)  # the gradient along the body axes (the env computes it for them)
 SWIM_SPEED_VIEWS = (*GRADIENT_VIEWS, "ego_mem_speed")  # the swimmer's own full swim speed
 TARGET_FLOW_VIEWS = ("geo_priv_critic",)
 SCENE_VIEWS = ("geo_priv_scene",)
@@ -204,6 +205,10 @@ def needs_phase(names) -> bool:
 
 def needs_gradient(names) -> bool:
     return any(name in GRADIENT_VIEWS for name in names)
+
+
+def needs_body_gradient(names) -> bool:
+    return any(name in BODY_GRADIENT_VIEWS for name in names)
 
 
 def needs_swim_speed(names) -> bool:
