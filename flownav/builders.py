@@ -94,18 +94,27 @@ def build_flow(cfg: Mapping, device="cpu") -> FlowField:
         kw = {k: float(cfg[k]) for k in names if cfg.get(k) is not None}
         return VortexStreetFlow(**kw)
 
-    def zoo():
-        from flownav.flows.zoo import ZOO
-
-        if cfg["name"] not in ZOO:
-            raise ConfigError(f"flow.name is {cfg['name']!r}; the zoo's flows are {sorted(ZOO)}")
+    def named(registry: dict, what: str):
+        """A flow of the zoo or of the validation set: its class by ``name``, the class's keywords in ``params``."""
+        if cfg["name"] not in registry:
+            raise ConfigError(f"flow.name is {cfg['name']!r}; the {what} flows are {sorted(registry)}")
         kw = dict(cfg.get("params") or {})
         if cfg.get("bounds") is not None:
             kw["bounds"] = _box(cfg["bounds"])
         try:
-            return ZOO[cfg["name"]](**kw)
+            return registry[cfg["name"]](**kw)
         except TypeError as e:
             raise ConfigError(f"flow.params: {e}") from e
+
+    def zoo():
+        from flownav.flows.zoo import ZOO
+
+        return named(ZOO, "zoo's")
+
+    def validation():
+        from flownav.flows.validation import VALIDATION
+
+        return named(VALIDATION, "validation set's")
 
     def family():
         bounds = _box(cfg["bounds"]) if cfg.get("bounds") is not None else WAKE_BOUNDS
@@ -127,7 +136,15 @@ def build_flow(cfg: Mapping, device="cpu") -> FlowField:
         except ValueError as e:
             raise ConfigError(f"flow.members.*.weight: {e}") from e
 
-    kinds = {"grid": grid, "abc": abc, "uniform": uniform, "vortex_street": vortex_street, "zoo": zoo, "family": family}
+    kinds = {
+        "grid": grid,
+        "abc": abc,
+        "uniform": uniform,
+        "vortex_street": vortex_street,
+        "zoo": zoo,
+        "validation": validation,
+        "family": family,
+    }
     flow = kinds[cfg["type"]]()
     if cfg.get("periodic_axes"):
         try:

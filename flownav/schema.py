@@ -237,6 +237,7 @@ FLOWS = {
     "abc": {k: Float() for k in ("A", "B", "C", "eps", "omega")} | {"bounds": Key(BOX, null=True)},
     "uniform": {"velocity": Key(FLOATS, size=3), "bounds": Key(BOX, null=True)},
     "zoo": {"name": Str(required=True), "bounds": Key(BOX, null=True)},  # params: the flow class's keywords
+    "validation": {"name": Str(required=True), "bounds": Key(BOX, null=True)},  # the same for validation flows
     "family": {"bounds": Key(BOX, null=True)},  # members: checked by their constructors (flows/families.py)
     "vortex_street": {
         "period": Float(gt=0),

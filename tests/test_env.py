@@ -129,9 +129,7 @@ def test_ego_views_are_invariant_under_rotation_of_the_scene(phi, seed):
     speed = torch.rand(n, generator=g, dtype=torch.float64)
     views = ("geo", "ego", "ego_flow", "ego_up", "ego_mem", "ego_mem_speed")
     frame = body_frame(theta, psi)
-    before = compute_views(
-        State(to_target, vel, flow, theta, psi, frame, history, swim_speed=speed), views
-    )
+    before = compute_views(State(to_target, vel, flow, theta, psi, frame, history, swim_speed=speed), views)
     r = lambda v: rotate_z(v, phi)  # noqa: E731
     turned = body_frame(theta + phi, psi)
     rotated = State(

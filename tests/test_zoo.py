@@ -1,4 +1,5 @@
-"""The generalisation zoo: incompressible held-out flows, none a member of a training family, and the suite."""
+"""The generalisation zoo and the validation set: incompressible held-out flows, none a member of a training family,
+the validation set's none of the zoo's kinds, and the suites."""
 
 import math
 
@@ -10,6 +11,7 @@ from omegaconf import OmegaConf
 from flownav.builders import build_flow, build_task, compose_config
 from flownav.evaluation.experiments import Suite
 from flownav.evaluation.kinds.zoo import family_member
+from flownav.flows.validation import J1_ZERO, VALIDATION, BickleyJet, HillVortex, LambDipole
 from flownav.flows.zoo import ZOO, BeltramiShell
 from flownav.paths import REPO_ROOT
 
@@ -31,9 +33,9 @@ def jacobian(flow, n=64, seed=0):
     return torch.stack(rows, 1), u.detach(), pos.detach()
 
 
-@pytest.mark.parametrize("name", sorted(ZOO))
-def test_every_zoo_flow_is_incompressible_and_weaker_than_the_swimmer_on_average(name):
-    flow = ZOO[name]()
+@pytest.mark.parametrize("name", sorted(ZOO) + sorted(VALIDATION))
+def test_every_held_out_flow_is_incompressible_and_weaker_than_the_swimmer_on_average(name):
+    flow = (ZOO | VALIDATION)[name]()
     J, u, _ = jacobian(flow)
     div = J.diagonal(dim1=1, dim2=2).sum(-1)
     scale = J.abs().amax()
@@ -56,6 +58,51 @@ def test_burgers_vortex_is_the_textbook_field():
     u = flow.velocity(pos, torch.zeros(1, dtype=torch.float64))[0]
     # u_r = -alpha r / 2 = -0.1, u_theta = Gamma / (2 pi r) (1 - e^{-r^2}) = (1 - e^{-4}) / 2, u_z = alpha z = 0.1
     assert u.tolist() == pytest.approx([-0.1, (1 - math.exp(-4)) / 2, 0.1])
+
+
+def test_the_validation_flows_are_the_textbook_fields():
+    """Exact values: the Bickley jet's centre line moves at U whatever its waves; Hill's vortex turns the stream
+    back at its centre (1.5 U against it) and is continuous across its sphere; the Lamb-Chaplygin dipole (alone: no
+    images in reach) moves its centre at U (1 - 1 / J0(k a)) and is continuous across its circle."""
+    t0 = torch.zeros(1, dtype=torch.float64)
+    jet = BickleyJet()
+    for x in (0.0, 3.3, 11.0):
+        u = jet.velocity(torch.tensor([[x, jet.y0, 1.0]], dtype=torch.float64), t0 + x)[0]
+        assert u[0].item() == pytest.approx(jet.U) and u[2].item() == 0.0
+    hill = HillVortex(U=0.5, radius=3.0)
+    centre = torch.tensor([hill.center], dtype=torch.float64)
+    assert hill.velocity(centre, t0)[0].tolist() == pytest.approx([0.75, 0.0, 0.0])
+    far = centre + torch.tensor([[0.0, 0.0, 4.9]], dtype=torch.float64)  # 1.63 radii: the stream along -x dominates
+    assert hill.velocity(far, t0)[0, 0].item() < 0
+    dipole = LambDipole(U=0.5, radius=3.0, spacing=1e6)
+    x0, y0 = dipole.start
+    centre = torch.tensor([[x0, y0, 0.0]], dtype=torch.float64)
+    j0 = float(torch.special.bessel_j0(torch.tensor(J1_ZERO, dtype=torch.float64)))
+    assert dipole.velocity(centre, t0)[0].tolist() == pytest.approx([0.5 * (1 - 1 / j0), 0.0, 0.0], abs=1e-9)
+    angles = torch.linspace(0.1, 3.0, 7, dtype=torch.float64)
+    sphere = torch.stack((torch.cos(angles), 0.6 * torch.sin(angles), 0.8 * torch.sin(angles)), -1)
+    circle = torch.stack((torch.cos(angles), torch.sin(angles), torch.zeros_like(angles)), -1)
+    for flow, origin, ring in ((hill, hill.center, sphere), (dipole, (x0, y0, 0.0), circle)):
+        origin = torch.tensor(origin, dtype=torch.float64)
+        inner, outer = (flow.velocity(origin + r * ring, t0.expand(7)) for r in (3.0 - 1e-7, 3.0 + 1e-7))
+        assert torch.allclose(inner, outer, atol=1e-5), type(flow).__name__
+        assert inner.abs().max() > 0.1  # a boundary where the flow moves
+
+
+def test_no_validation_case_is_a_zoo_flow_or_a_member_of_a_training_family():
+    """The validation set is for choices: its flows must be of kinds neither trained on nor reported (the zoo)."""
+    families = OmegaConf.to_container(compose_eval("+experiment=generalization").suite.generalization.training_families)
+    cfg = compose_eval("+experiment=validation")
+    assert not set(VALIDATION) & set(ZOO) and not set(VALIDATION.values()) & set(ZOO.values())
+    g = torch.Generator().manual_seed(0)
+    for case, cs in cfg.suite.validation.cases.items():
+        assert cs.flow.type == "validation" and cs.flow.name in VALIDATION, case
+        assert family_member(cs.flow, cfg.env, families) is None, case
+        flow = build_flow(cs.flow)
+        start, target = build_task(cs.task, flow).sample(500, g)
+        d = (target - start).norm(dim=-1)
+        assert 8.0 <= float(d.min()) and float(d.max()) <= 12.0, case
+    assert len(cfg.suite.validation.cases) == len(VALIDATION)
 
 
 def test_no_zoo_case_is_a_member_of_a_training_family_unless_it_says_so():

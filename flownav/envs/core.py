@@ -352,9 +352,7 @@ def step(
     pos = flow.wrap(moved)  # periodic axes: back into the box
     steps = state.steps + 1
     time = steps * settings.dt
-    flow_vel, privileged = sense_flow(
-        flow, settings, state.strength, pos, state.t0 + time, state.target, theta, psi
-    )
+    flow_vel, privileged = sense_flow(flow, settings, state.strength, pos, state.t0 + time, state.target, theta, psi)
     require_finite(flow_vel, "the flow velocity", FLOW_FIX, pos)
     error = state.sensor_error
     if settings.noisy:
