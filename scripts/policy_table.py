@@ -18,7 +18,7 @@ POLICIES = {
     "student": "student (paper)",
     "baseline": "baseline (paper: PPO on the ego view)",
     "student_robust": "student_robust",
-    "generalist_student": "**generalist_student** (`ego_mem`)",
+    "generalist_student": "**generalist_student** (`ego_mem_grad`)",
     "generalist_student_noisy": "generalist_student_noisy (`ego_mem`, trained with noisy sensors)",
 }
 
