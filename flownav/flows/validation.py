@@ -10,7 +10,8 @@ coordinates.
 * :class:`BickleyJet` (del-Castillo-Negrete & Morrison 1993; Rypina et al. 2007): a meandering zonal jet of
   width L carrying three travelling waves, layered in z; stream function, with Y = (y - y0) / L,
       psi = -U L tanh Y + U L sech^2 Y sum_n eps_n cos(k_n (x - c_n t)),  u = -d psi / dy,  v = d psi / dx,  w = 0,
-  k_n = n k_1, the amplitudes eps_n and speeds c_n / U of Rypina et al.
+  k_n = n k_1, the amplitudes eps_n and speeds c_n / U of Rypina et al. The waves' speeds share no period, so
+  every episode starts at t = 0 (the starts and targets differ).
 * :class:`HillVortex` (Hill 1894): Hill's spherical vortex of radius a held in a uniform stream of speed U(t) along
   -x (its axis), U(t) = U (1 + eps sin(omega t)); Stokes stream function about the axis (rho the distance to it,
   R to the centre), u_axial = (1 / rho) d psi / d rho, u_rho = -(1 / rho) d psi / d x_axial,
@@ -24,6 +25,8 @@ coordinates.
 """
 
 from __future__ import annotations
+
+import math
 
 import torch
 from torch import Tensor
@@ -111,8 +114,7 @@ class LambDipole(_Analytic):
         self.k = J1_ZERO / self.a
         self.c = 2 * self.U / (self.k * float(torch.special.bessel_j0(torch.tensor(J1_ZERO, dtype=torch.float64))))
         self.start = (bounds.lo[0], (bounds.lo[1] + bounds.hi[1]) / 2)  # the centre at t = 0
-        self._finish(bounds, None, False)
-        self.period = self.spacing / self.U
+        self._finish(bounds, 2 * math.pi * self.U / self.spacing, True)  # period spacing / U: speeds over all of it
 
     def velocity(self, pos: Tensor, t: Tensor) -> Tensor:
         travelled = torch.remainder(self.U * t.to(pos.dtype), self.spacing)
