@@ -21,7 +21,7 @@
   d u_body_i / d x_body_j), what a lateral-line-like array of flow sensors reads: how the flow changes around the
   swimmer, not only where it is. Forward differences of step ``GRADIENT_STEP`` along the body axes, so the view
   turns with the swimmer: under a rotation of the scene about z it is unchanged, as the other ego views are.
-  (Measured, not shipped: docs/generalist_variants.md.)
+  The generalist student's view (chosen on the validation set: docs/generalist_variants.md).
 * ``geo_sincos`` (9, ours): ``geo`` with theta as (cos theta, sin theta). theta wraps at +-pi, which is
   heading straight upstream, the very heading of the wake crossing; the angle jumps there and the
   pair does not. Same information as ``geo``. ``geo_flow_sincos``: the same for ``geo_flow`` (SI 1).
