@@ -433,9 +433,11 @@ def sense_flow(
     points = torch.cat(parts)
     rows = points.shape[0]
     u = flow_at(flow, settings, strength, points.reshape(-1, 3), t.repeat(rows), slots.repeat(rows)).view(rows, n, 3)
+    # [n, j (the step's direction), i (inertial component)]: the forward differences of the three rows from ``row``
+    differences = lambda row: ((u[row : row + 3] - u[0]) / GRADIENT_STEP).transpose(0, 1)  # noqa: E731
     out, row = {}, 1
     if inertial:
-        out["flow_grad"] = ((u[1:4] - u[0]) / GRADIENT_STEP).permute(1, 2, 0)  # [n, i (component), j (d/dx_j)]
+        out["flow_grad"] = differences(1).transpose(1, 2)  # [n, i (component), j (d/dx_j)]
         row = 4
     if target_flow:
         out["target_flow"], row = u[row], row + 1
@@ -443,8 +445,7 @@ def sense_flow(
         out["flow_around"] = u[row : row + len(AROUND_OFFSETS)].transpose(0, 1)  # [n, P, 3]
         row += len(AROUND_OFFSETS)
     if body:
-        change = ((u[row : row + 3] - u[0]) / GRADIENT_STEP).transpose(0, 1)  # [n, j (along b_j), inertial]
-        out["body_flow_grad"] = to_body(frame, change).transpose(1, 2)  # [n, i (body component), j]
+        out["body_flow_grad"] = to_body(frame, differences(row)).transpose(1, 2)  # [n, i (body component), j]
     return u[0], out
 
 

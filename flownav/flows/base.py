@@ -43,6 +43,10 @@ class Box:
     def size(self) -> tuple[float, float, float]:
         return tuple(h - l for l, h in zip(self.lo, self.hi, strict=True))
 
+    @property
+    def center(self) -> tuple[float, float, float]:
+        return tuple((l + h) / 2 for l, h in zip(self.lo, self.hi, strict=True))
+
 
 @dataclass(frozen=True)
 class Cylinder:

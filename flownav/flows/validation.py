@@ -67,7 +67,7 @@ class BickleyJet(_Analytic):
 
     def __init__(self, U=1.6, width=2.5, wavenumber=0.556 / 2.5, bounds: Box = JET_BOX):
         self.U, self.L, self.k = float(U), float(width), float(wavenumber)
-        self.y0 = (bounds.lo[1] + bounds.hi[1]) / 2
+        self.y0 = bounds.center[1]
         self._finish(bounds, None, False)
 
     def velocity(self, pos: Tensor, t: Tensor) -> Tensor:
@@ -87,7 +87,7 @@ class BickleyJet(_Analytic):
 class HillVortex(_Analytic):
     def __init__(self, U=0.6, radius=4.0, eps=0.3, omega=0.4, bounds: Box = STREAM_BOX):
         self.U, self.a, self.eps, self.omega = float(U), float(radius), float(eps), float(omega)
-        self.center = tuple((lo + hi) / 2 for lo, hi in zip(bounds.lo, bounds.hi, strict=True))
+        self.center = bounds.center
         self._finish(bounds, omega, eps != 0)
 
     def velocity(self, pos: Tensor, t: Tensor) -> Tensor:
@@ -113,16 +113,16 @@ class LambDipole(_Analytic):
         self.U, self.a, self.spacing = float(U), float(radius), float(spacing)
         self.k = J1_ZERO / self.a
         self.c = 2 * self.U / (self.k * float(torch.special.bessel_j0(torch.tensor(J1_ZERO, dtype=torch.float64))))
-        self.start = (bounds.lo[0], (bounds.lo[1] + bounds.hi[1]) / 2)  # the centre at t = 0
+        self.start = (bounds.lo[0], bounds.center[1])  # the centre at t = 0
         self._finish(bounds, 2 * math.pi * self.U / self.spacing, True)  # period spacing / U: speeds over all of it
 
     def velocity(self, pos: Tensor, t: Tensor) -> Tensor:
         travelled = torch.remainder(self.U * t.to(pos.dtype), self.spacing)
-        u = torch.zeros_like(pos[..., 0])
-        v = torch.zeros_like(u)
+        y = pos[..., 1] - self.start[1]  # the same for every image
+        u = torch.zeros_like(y)
+        v = torch.zeros_like(y)
         for m in range(-self.IMAGES, self.IMAGES + 1):
             x = pos[..., 0] - (self.start[0] + travelled + m * self.spacing)
-            y = pos[..., 1] - self.start[1]
             r2 = (x * x + y * y).clamp_min(1e-12)
             r = r2.sqrt()
             kr = self.k * r

@@ -96,7 +96,7 @@ class DoubleGyreFlow(_Analytic):
 class BurgersVortex(_Analytic):
     def __init__(self, circulation=12.0, core=1.5, strain=0.08, bounds: Box = CENTRED_BOX):
         self.gamma, self.core, self.alpha = float(circulation), float(core), float(strain)
-        self.center = tuple((lo + hi) / 2 for lo, hi in zip(bounds.lo, bounds.hi, strict=True))
+        self.center = bounds.center
         self._finish(bounds, None, False)
 
     def velocity(self, pos: Tensor, t: Tensor) -> Tensor:
@@ -118,7 +118,7 @@ class StuartVortexRow(_Analytic):
         bounds: Box = LAYER_BOX,
     ):
         self.U, self.k, self.rho, self.c = float(U), 2 * math.pi / float(wavelength), float(rho), float(advection)
-        self.y0 = (bounds.lo[1] + bounds.hi[1]) / 2
+        self.y0 = bounds.center[1]
         self._finish(bounds, None, False)
         if self.c:  # the pattern repeats after one wavelength
             self.period = float(wavelength) / abs(self.c)
