@@ -239,7 +239,7 @@ def build_env(
             random_flow_phase=bool(env_cfg.get("random_flow_phase", True)),
             flow_strength=None if strength is None else tuple(float(v) for v in strength),
             flow_strength_full=float(env_cfg.get("flow_strength_full") or 0.0),
-            sensor_noise=(float(noise.get("flow") or 0.0), float(noise.get("target") or 0.0)),
+            sensor_noise=tuple(float(noise.get(key) or 0.0) for key in ("flow", "target", "gradient")),
             seed=seed,
             device=device,
         )

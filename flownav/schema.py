@@ -221,7 +221,7 @@ ENV = {
     "random_flow_phase": Bool(),
     "flow_strength": Key(FLOATS, size=2, null=True),  # its range is NavigationEnv's to check
     "flow_strength_full": Float(ge=0, le=1),
-    "sensor_noise": {"flow": Float(ge=0), "target": Float(ge=0)},
+    "sensor_noise": {"flow": Float(ge=0), "target": Float(ge=0), "gradient": Float(ge=0)},
     "reward": REWARD,
 }
 

@@ -141,6 +141,11 @@ CASES = [
         "env.sensor_noise.flow must be >= 0, a finite number; got -0.1",
     ),
     (
+        "gradient_noise_negative",
+        train_case("env.sensor_noise.gradient=-0.02"),
+        "env.sensor_noise.gradient must be >= 0, a finite number; got -0.02",
+    ),
+    (
         "hidden_zero",
         train_case("algo.actor.hidden=[0]"),
         "algo.actor.hidden must be a non-empty list of integers, each >= 1; got [0]",

@@ -46,7 +46,7 @@ def test_noise_reaches_the_ego_views_only_with_the_configured_spread():
     views' flow reading errs by sigma_flow per component and the to-target vector by sigma_target times its
     length (body frame: a rotation keeps an isotropic error isotropic)."""
     flow_std, target_std = 0.2, 0.05
-    exact, noisy = run(make((0.0, 0.0)), 12), run(make((flow_std, target_std)), 12)
+    exact, noisy = run(make((0.0, 0.0, 0.0)), 12), run(make((flow_std, target_std, 0.0)), 12)
     for a, b in zip(exact, noisy, strict=True):
         assert torch.equal(a["position"], b["position"]) and torch.equal(a["geo_priv"], b["geo_priv"])
     a, b = exact[-1]["ego_flow"], noisy[-1]["ego_flow"]
@@ -64,7 +64,7 @@ def test_the_memory_keeps_each_reading_as_it_was_sensed():
     """The newest memory sample is the current reading (the one ego_flow reports), and a reading stays as sensed
     while it is remembered: four steps later it is the next sample, the same inertial vector seen from the new
     heading."""
-    env = make((0.3, 0.0), n=64)
+    env = make((0.3, 0.0, 0.0), n=64)
     steps = run(env, 8)
     now = steps[-1]["ego_mem"][:, 8:].view(-1, HISTORY_LEN, 3)
     assert torch.allclose(now[:, 0], steps[-1]["ego_flow"][:, 3:], atol=1e-6)
@@ -84,10 +84,10 @@ def _frames(heading):
 
 def test_a_noisy_env_resumes_exactly():
     """The last reading's error is part of the saved state: a fresh env that loads it sees and steps identically."""
-    env = make((0.2, 0.1), n=32)
+    env = make((0.2, 0.1, 0.0), n=32)
     run(env, 5)
     saved = env.state_dict()
-    twin = make((0.2, 0.1), n=32, seed=99)
+    twin = make((0.2, 0.1, 0.0), n=32, seed=99)
     twin.reset()
     twin.load_state_dict(saved)
     a, b = env._observe(), twin._observe()
@@ -101,7 +101,7 @@ def test_a_noisy_env_resumes_exactly():
 def test_exact_sensors_draw_nothing_and_noisy_ones_draw_after_the_episode():
     """With exact sensors a step draws nothing from the env's generator (every existing run keeps its random
     streams); noisy sensors draw after a reset's other draws, so the first episodes are the same."""
-    exact, noisy = make((0.0, 0.0), n=16), make((0.1, 0.0), n=16)
+    exact, noisy = make((0.0, 0.0, 0.0), n=16), make((0.1, 0.0, 0.0), n=16)
     a, b = exact.reset(), noisy.reset()
     assert torch.equal(a["position"], b["position"]) and torch.equal(a["target"], b["target"])
     exact_before, noisy_before = exact.rng.get_state(), noisy.rng.get_state()
@@ -110,16 +110,58 @@ def test_exact_sensors_draw_nothing_and_noisy_ones_draw_after_the_episode():
         b = noisy.step(b.set("action", torch.full((16, 3), 0.5)))["next"]
     assert torch.equal(exact.rng.get_state(), exact_before) and not exact.state.sensor_error.any()
     assert not torch.equal(noisy.rng.get_state(), noisy_before)
-    with pytest.raises(ValueError, match=r"sensor_noise is \(flow, target\)"):
-        NavigationEnv(swirl(), num_envs=2, sensor_noise=(-1.0, 0.0))
+    with pytest.raises(ValueError, match=r"sensor_noise is \(flow, target, gradient\)"):
+        NavigationEnv(swirl(), num_envs=2, sensor_noise=(-1.0, 0.0, 0.0))
+
+
+GRADIENT_VIEWS = ("geo_priv", "ego_mem_grad")
+
+
+def make_grad(noise, n=4096, seed=3):
+    """make() with the view that senses the flow's gradient along the body axes."""
+    env = make(noise, n, seed)
+    return NavigationEnv(
+        env.flow, env.settings.task, num_envs=n, views=GRADIENT_VIEWS, time_limit=100.0, sensor_noise=noise, seed=seed
+    )
+
+
+def test_the_gradient_errs_only_with_its_own_noise_and_with_its_spread():
+    """Flow and to-target noise leave ego_mem_grad's gradient exact; a gradient noise gives each of its nine
+    components an error of that spread, fresh each step, and leaves the dynamics and the privileged view exactly as
+    without it; its errors are drawn after the flow's and the target's, so the first readings of those agree."""
+    grad = lambda td: td["ego_mem_grad"][:, -9:]  # noqa: E731
+    exact, flow_only, both = (run(make_grad(noise), 6) for noise in ((0, 0, 0), (0.2, 0.05, 0), (0.2, 0.05, 0.03)))
+    for a, b, c in zip(exact, flow_only, both, strict=True):
+        assert torch.equal(grad(a), grad(b)) and torch.equal(a["geo_priv"], c["geo_priv"])
+        assert torch.equal(a["position"], c["position"])
+    assert torch.equal(flow_only[0]["ego_mem_grad"][:, :-9], both[0]["ego_mem_grad"][:, :-9])
+    error = grad(both[-1]) - grad(exact[-1])
+    assert error.std().item() == pytest.approx(0.03, rel=0.05) and error.mean().abs().item() < 0.002
+    earlier = grad(both[-2]) - grad(exact[-2])
+    assert abs(torch.corrcoef(torch.stack((error.flatten(), earlier.flatten())))[0, 1].item()) < 0.05
+
+
+def test_a_gradient_noisy_env_resumes_exactly():
+    """The gradient's errors are part of the saved state too."""
+    env = make_grad((0.1, 0.05, 0.03), n=32)
+    run(env, 5)
+    twin = make_grad((0.1, 0.05, 0.03), n=32, seed=99)
+    twin.reset()
+    twin.load_state_dict(env.state_dict())
+    a, b = env._observe(), twin._observe()
+    assert torch.equal(a["ego_mem_grad"], b["ego_mem_grad"])
+    action = torch.full((32, 3), 0.5)
+    a, b = (e.step(o.set("action", action))["next"] for e, o in ((env, a), (twin, b)))
+    assert torch.equal(a["ego_mem_grad"], b["ego_mem_grad"])
 
 
 def test_the_config_key_reaches_the_env():
-    """env.sensor_noise.{flow,target} of the configs is the env's (flow, target)."""
-    cfg = compose_config(["obs=ego_mem", "env.sensor_noise.flow=0.15", "env.sensor_noise.target=0.02"])
+    """env.sensor_noise.{flow,target,gradient} of the configs is the env's (flow, target, gradient)."""
+    keys = ["env.sensor_noise.flow=0.15", "env.sensor_noise.target=0.02", "env.sensor_noise.gradient=0.03"]
+    cfg = compose_config(["obs=ego_mem", *keys])
     flow = build_flow(cfg.flow)
     env = build_env(cfg.env, flow, build_task(cfg.task, flow), ["ego_mem"], num_envs=4)
-    assert env.settings.sensor_noise == (0.15, 0.02) and env.settings.noisy
+    assert env.settings.sensor_noise == (0.15, 0.02, 0.03) and env.settings.noisy
     assert build_env(compose_config([]).env, flow, build_task(cfg.task, flow), ["ego_mem"], 4).settings.noisy is False
 
 
@@ -136,9 +178,9 @@ def test_the_noise_suite_compares_only_policies_that_sense_and_applies_its_noise
     levels = set()
     for name, suite in cfg.suite.items():
         noise = suite.env.sensor_noise
-        assert noise.flow > 0 and noise.target > 0, name
-        levels.add((noise.flow, noise.target))
+        assert noise.flow > 0 and noise.target > 0 and noise.gradient > 0, name
+        levels.add((noise.flow, noise.target, noise.gradient))
         sensed = [cfg.policies[p].obs in SENSED_VIEWS and "checkpoint" in cfg.policies[p] for p in suite.policies]
         assert all(sensed), name
-    assert levels == {(0.1, 0.05), (0.2, 0.1)}
+    assert levels == {(0.1, 0.05, 0.02), (0.2, 0.1, 0.04)}
     assert "generalist_student_noisy" in cfg.suite.noise_020_paper.policies

@@ -76,7 +76,7 @@ class Settings:
     (each episode's factor on ``swim_speed_scale``). views: the observation views (they decide what is sensed).
     max_steps: the time limit in steps. misalignment_deg: the scene turned about z through ``rotation_center``.
     flow_strength: ``(low, high)`` of each episode's factor on the flow, or None; flow_strength_full: the share
-    of episodes at 1. sensor_noise: ``(flow, target)`` standard deviations of the ego views' sensors
+    of episodes at 1. sensor_noise: ``(flow, target, gradient)`` standard deviations of the ego views' sensors
     (:func:`draw_sensor_error`).
     """
 
@@ -92,12 +92,17 @@ class Settings:
     random_flow_phase: bool = True
     flow_strength: tuple[float, float] | None = None
     flow_strength_full: float = 0.0
-    sensor_noise: tuple[float, float] = (0.0, 0.0)
+    sensor_noise: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def noisy(self) -> bool:
         """Whether the ego views read noisy sensors (any view does and a standard deviation is set)."""
         return any(self.sensor_noise) and any(v in SENSED_VIEWS for v in self.views)
+
+    @property
+    def sensor_error_width(self) -> int:
+        """Standard-normal errors per reading: flow (3) and to-target (3), plus the gradient's (9) when it errs."""
+        return 6 + 9 * (self.sensor_noise[2] > 0)
 
 
 @dataclass
@@ -131,7 +136,8 @@ class Swimmers:
     target_flow: Tensor  # [B, 3] the flow at the target (privileged critic)
     flow_around: Tensor  # [B, P, 3] the flow at AROUND_OFFSETS from the swimmer (geo_priv_around)
     scene: Tensor  # [B] int64 the episode's paper-scene code (:func:`paper_scene`; the scene view), set at reset
-    sensor_error: Tensor  # [B, 6] standard-normal errors of the last reading: flow (3), to-target (3); zeros if exact
+    sensor_error: Tensor  # [B, 6 or 15] standard-normal errors of the last reading: flow (3), to-target (3),
+    # body-axis gradient (9, with a gradient error; Settings.sensor_error_width); zeros if exact
 
 
 STATE_FIELDS = tuple(f.name for f in fields(Swimmers))
@@ -190,7 +196,7 @@ def initial_state(num_envs: int, settings: Settings, device) -> Swimmers:
         target_flow=z(3),
         flow_around=z(len(AROUND_OFFSETS), 3),
         scene=torch.zeros(num_envs, dtype=torch.int64, device=device),
-        sensor_error=z(6),
+        sensor_error=z(settings.sensor_error_width),
     )
 
 
@@ -288,7 +294,7 @@ def reset(state: Swimmers, idx: Tensor, flow: FlowField, settings: Settings, rng
     zero, zero_int = torch.zeros_like(d), torch.zeros_like(idx)
     error = state.sensor_error
     if settings.noisy:  # drawn last: exact sensors keep the random streams of the other draws
-        error = put(error, draw_sensor_error(idx.numel(), rng))
+        error = put(error, draw_sensor_error(idx.numel(), rng, settings.sensor_error_width))
     if state.flow_ring.shape[1]:  # no past yet: the swimmer has been sensing its start flow
         state.flow_ring[idx] = sensed_flow(flow_vel, error[idx], settings)[:, None, :]
     state = replace(
@@ -315,12 +321,17 @@ def reset(state: Swimmers, idx: Tensor, flow: FlowField, settings: Settings, rng
     return keep_scene(state, flow, settings, idx)
 
 
-def draw_sensor_error(n: int, rng: torch.Generator) -> Tensor:
-    """Standard-normal errors of n readings, ``[n, 6]``: the flow sensor's (3) and the to-target sensor's (3).
-    The ego views read the flow as u + sigma_flow e (the total velocity as the exactly known swim velocity plus
-    that reading; the memory keeps the readings as sensed) and the to-target vector d as d + sigma_target |d| e
-    (a relative range and bearing error); one fresh draw per step (:func:`sensed_state`)."""
-    return torch.randn(n, 6, generator=rng, device=rng.device)
+def draw_sensor_error(n: int, rng: torch.Generator, width: int = 6) -> Tensor:
+    """Standard-normal errors of n readings, ``[n, width]``: the flow sensor's (3), the to-target sensor's (3) and,
+    with ``width`` 15, the gradient sensor's (9). The ego views read the flow as u + sigma_flow e (the total velocity
+    as the exactly known swim velocity plus that reading; the memory keeps the readings as sensed), the to-target
+    vector d as d + sigma_target |d| e (a relative range and bearing error) and each component of the body-axis
+    gradient as G_ij + sigma_gradient e_ij; one fresh draw per step (:func:`sensed_state`). The gradient's errors
+    are drawn after the others: without them a draw is what it was before the gradient could err."""
+    error = torch.randn(n, 6, generator=rng, device=rng.device)
+    if width == 6:
+        return error
+    return torch.cat((error, torch.randn(n, width - 6, generator=rng, device=rng.device)), -1)
 
 
 def sensed_flow(flow_vel: Tensor, error: Tensor, settings: Settings) -> Tensor:
@@ -358,7 +369,7 @@ def step(
     if settings.noisy:
         if rng is None:
             raise ValueError("sensor noise draws from the env's generator: pass rng to step")
-        error = draw_sensor_error(pos.shape[0], rng)
+        error = draw_sensor_error(pos.shape[0], rng, settings.sensor_error_width)
     ring_ptr = state.ring_ptr
     if state.flow_ring.shape[1]:
         ring_ptr = (ring_ptr + 1) % state.flow_ring.shape[1]
@@ -485,12 +496,17 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
 
 def sensed_state(seen: State, state: Swimmers, settings: Settings) -> State:
     """What the ego views read with noisy sensors (:func:`draw_sensor_error`): the flow reading with its error,
-    the total velocity as the swim velocity plus that reading, the to-target vector with its relative error (the
-    memory already holds the readings as sensed)."""
-    flow_error = settings.sensor_noise[0] * state.sensor_error[:, :3]
+    the total velocity as the swim velocity plus that reading, the to-target vector with its relative error, the
+    body-axis gradient with its error (the memory already holds the readings as sensed)."""
+    flow_noise, target_noise, gradient_noise = settings.sensor_noise
+    flow_error = flow_noise * state.sensor_error[:, :3]
     d = seen.to_target
-    d_error = settings.sensor_noise[1] * d.norm(dim=-1, keepdim=True) * state.sensor_error[:, 3:]
-    return replace(seen, flow=seen.flow + flow_error, velocity=seen.velocity + flow_error, to_target=d + d_error)
+    d_error = target_noise * d.norm(dim=-1, keepdim=True) * state.sensor_error[:, 3:6]
+    sensed = replace(seen, flow=seen.flow + flow_error, velocity=seen.velocity + flow_error, to_target=d + d_error)
+    if gradient_noise and seen.body_flow_gradient is not None:
+        gradient_error = gradient_noise * state.sensor_error[:, 6:].view(-1, 3, 3)
+        sensed = replace(sensed, body_flow_gradient=seen.body_flow_gradient + gradient_error)
+    return sensed
 
 
 # From starts upstream of this x (the cylinder's side of the paper's regions) the paper's teacher reaches the

@@ -49,8 +49,9 @@ class NavigationEnv(EnvBase):
             first reset's starts, targets and headings are those of an env without it (later ones differ).
         flow_strength_full: the fraction of episodes that get the flow at full strength (1) instead of a
             draw in ``flow_strength``, so the hardest case keeps its weight in training.
-        sensor_noise: ``(flow, target)``: standard deviations of the ego views' sensors, fresh each step: the flow
-            reading's error per component (velocity units), the to-target vector's relative to its length
+        sensor_noise: ``(flow, target, gradient)``: standard deviations of the ego views' sensors, fresh each step:
+            the flow reading's error per component (velocity units), the to-target vector's relative to its length,
+            the body-axis gradient's per component (``ego_mem_grad``; velocity per unit length)
             (:func:`flownav.envs.core.draw_sensor_error`). The geo and privileged views stay exact.
     """
 
@@ -72,7 +73,7 @@ class NavigationEnv(EnvBase):
         random_flow_phase: bool = True,
         flow_strength: tuple[float, float] | None = None,
         flow_strength_full: float = 0.0,
-        sensor_noise: tuple[float, float] = (0.0, 0.0),
+        sensor_noise: tuple[float, float, float] = (0.0, 0.0, 0.0),
         seed: int | None = 0,
         device="cpu",
     ):
@@ -91,8 +92,10 @@ class NavigationEnv(EnvBase):
         if flow_strength_full and flow_strength is None:
             raise ValueError("flow_strength_full needs flow_strength=[low, high] (the draw it replaces)")
         sensor_noise = tuple(float(v) for v in sensor_noise)
-        if len(sensor_noise) != 2 or not all(v >= 0 for v in sensor_noise):
-            raise ValueError(f"sensor_noise is (flow, target), two standard deviations >= 0; got {sensor_noise}")
+        if len(sensor_noise) != 3 or not all(v >= 0 for v in sensor_noise):
+            raise ValueError(
+                f"sensor_noise is (flow, target, gradient), three standard deviations >= 0; got {sensor_noise}"
+            )
         super().__init__(device=device, batch_size=torch.Size([num_envs]))
         self.num_envs, self.views, self.time_limit = num_envs, check_views(views), float(time_limit)
         self.settings = Settings(

@@ -49,8 +49,8 @@
   left (what decides truncation, hence the value) and the flow velocity at the target.
 
 Sensor noise (``env.sensor_noise``, off by default) applies to the ego views only, the swimmer's on-board
-sensors (``SENSED_VIEWS``): the geo and privileged views are what the simulator knows, exactly (so is the gradient
-of ``ego_mem_grad``).
+sensors (``SENSED_VIEWS``): the geo and privileged views are what the simulator knows, exactly. ``ego_mem_grad``'s
+gradient errs only with its own standard deviation (``env.sensor_noise.gradient``).
 """
 
 from __future__ import annotations
