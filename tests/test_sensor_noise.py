@@ -141,6 +141,13 @@ def test_the_gradient_errs_only_with_its_own_noise_and_with_its_spread():
     assert abs(torch.corrcoef(torch.stack((error.flatten(), earlier.flatten())))[0, 1].item()) < 0.05
 
 
+def test_a_gradient_noise_no_view_reads_changes_nothing():
+    """Views without the gradient draw exactly what they drew before the gradient could err: the same readings step
+    by step with and without a gradient noise (the noise suite's other policies keep their numbers)."""
+    for a, b in zip(run(make((0.2, 0.05, 0.0)), 6), run(make((0.2, 0.05, 0.05)), 6), strict=True):
+        assert torch.equal(a["ego_mem"], b["ego_mem"]) and torch.equal(a["ego_flow"], b["ego_flow"])
+
+
 def test_a_gradient_noisy_env_resumes_exactly():
     """The gradient's errors are part of the saved state too."""
     env = make_grad((0.1, 0.05, 0.03), n=32)

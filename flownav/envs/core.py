@@ -101,8 +101,9 @@ class Settings:
 
     @property
     def sensor_error_width(self) -> int:
-        """Standard-normal errors per reading: flow (3) and to-target (3), plus the gradient's (9) when it errs."""
-        return 6 + 9 * (self.sensor_noise[2] > 0)
+        """Standard-normal errors per reading: flow (3) and to-target (3), plus the gradient's (9) when it errs and a
+        view reads it (so an env whose views read no gradient draws what it would without the gradient's noise)."""
+        return 6 + 9 * (self.sensor_noise[2] > 0 and needs_body_gradient(self.views))
 
 
 @dataclass
