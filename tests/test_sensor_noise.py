@@ -191,3 +191,20 @@ def test_the_noise_suite_compares_only_policies_that_sense_and_applies_its_noise
         assert all(sensed), name
     assert levels == {(0.1, 0.05, 0.02), (0.2, 0.1, 0.04)}
     assert "generalist_student_noisy" in cfg.suite.noise_020_paper.policies
+
+
+def test_the_gradient_sense_script_removes_exactly_the_gradient():
+    """scripts/gradient_sense.py's ablation feeds the policy its view with the last nine entries (the body-axis
+    gradient) zero and the rest as sensed; the shipped student's actions depend on them."""
+    from load import load_module
+
+    script = load_module("scripts/gradient_sense.py")
+    seen = []
+    act = script.without_gradient(lambda obs: seen.append(obs) or obs[:, :3])
+    obs = run(make_grad((0.0, 0.0, 0.0), n=64), 3)[-1]["ego_mem_grad"]
+    act(obs)
+    assert torch.equal(seen[0][:, :-9], obs[:, :-9]) and not seen[0][:, -9:].any() and obs[:, -9:].any(-1).all()
+    suite = script.Suite(compose_config(["+experiment=validation"], app="evaluate"))
+    policy, view, _ = suite.policy(script.POLICY)
+    assert view == "ego_mem_grad"
+    assert not torch.allclose(policy(obs), script.without_gradient(policy)(obs), atol=1e-3)
