@@ -2,10 +2,12 @@
 (view ``ego_mem_grad``) on the paper's task and on the validation set's cases, with its gradient as sensed, with a
 fresh error of each standard deviation on every gradient component at every step (``env.sensor_noise.gradient``;
 the flow and to-target readings exact), and with the gradient input set to zero (the sense removed; the policy's
-other inputs as they are).
+other inputs as they are). ``--rms``: the scale the noise suite's errors are set against instead, the RMS per
+component of the flow reading and of the gradient in the paper's task (2,000 swimmers of random actions, 100 steps).
 
     python scripts/gradient_sense.py                       # 0.02 0.05 0.1 1.0, 10,000 / 2,000 episodes
     python scripts/gradient_sense.py --noise 0.05 --episodes 1000 --validation-episodes 500
+    python scripts/gradient_sense.py --rms
 
 Episodes are the protocol's (evaluation seed EVAL_SEED), the same for every row of a case. docs/generalist.md quotes it.
 """
@@ -17,7 +19,7 @@ import argparse
 import torch
 from omegaconf import OmegaConf
 
-from flownav.builders import build_task, compose_config
+from flownav.builders import build_env, build_flow, build_task, compose_config
 from flownav.evaluation.experiments import Suite
 from flownav.evaluation.protocol import EvalSpec, evaluate
 
@@ -41,6 +43,24 @@ def cases(suite: Suite) -> dict:
     for name, case in suite.cfg.suite.validation.cases.items():
         out[f"validation/{name}"] = (case.flow, case.task, "validation")
     return out
+
+
+def reading_rms(swimmers: int = 2000, steps: int = 100) -> tuple[float, float]:
+    """RMS per component of ego_mem_grad's newest flow reading and of its gradient in the paper's task, over
+    ``swimmers`` swimmers of uniformly random actions for ``steps`` steps (env seed 0, action seed 1)."""
+    cfg = compose_config(["obs=ego_mem_grad"])
+    flow = build_flow(cfg.flow)
+    env = build_env(cfg.env, flow, build_task(cfg.task, flow), ["ego_mem_grad"], num_envs=swimmers)
+    g = torch.Generator().manual_seed(1)
+    low, high = torch.tensor([0.0, -0.5, -0.5]), torch.tensor([1.0, 0.5, 0.5])
+    td, flows, gradients = env.reset(), [], []
+    for _ in range(steps):
+        td = env.step(td.set("action", low + (high - low) * torch.rand(swimmers, 3, generator=g)))["next"]
+        view = td["ego_mem_grad"]
+        flows.append(view[:, 8:11])  # the newest memory sample: the flow reading in the body frame
+        gradients.append(view[:, -GRADIENT:])
+    rms = lambda x: torch.cat(x).pow(2).mean().sqrt().item()  # noqa: E731
+    return rms(flows), rms(gradients)
 
 
 def main(noise: list[float], episodes: int, validation_episodes: int) -> None:
@@ -67,5 +87,11 @@ if __name__ == "__main__":
     parser.add_argument("--noise", type=float, nargs="*", default=[0.02, 0.05, 0.1, 1.0])
     parser.add_argument("--episodes", type=int, default=10_000, help="on the paper's task")
     parser.add_argument("--validation-episodes", type=int, default=2_000, help="per validation case")
+    parser.add_argument("--rms", action="store_true", help="print the readings' RMS instead")
     args = parser.parse_args()
-    main(args.noise, args.episodes, args.validation_episodes)
+    if args.rms:
+        torch.set_num_threads(1)
+        flow_rms, gradient_rms = reading_rms()
+        print(f"RMS per component in the paper's task: flow reading {flow_rms:.3f}, gradient {gradient_rms:.3f}")
+    else:
+        main(args.noise, args.episodes, args.validation_episodes)
