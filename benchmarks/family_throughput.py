@@ -10,7 +10,9 @@ Every case steps ``NavigationEnv.step_and_maybe_reset`` with random actions (res
 config ``conf/flow/<name>.yaml`` and the task the generalist trains on (``task=family``; the wake alone: the
 paper's regions; the periodic family: the ABC task it is used with; the students' families: their experiment's),
 with the teacher's view (``geo_sincos``), with the generalist teacher's views (``geo_priv`` + ``geo_priv_critic``:
-4 look-ups per step instead of 1) and with the wider ``geo_priv_around`` (12 more points per step). The machine is
+4 look-ups per step instead of 1), with the wider ``geo_priv_around`` (12 more points per step) and with what a
+generalist student's DAgger env computes (``ego_mem_grad`` + ``geo_priv_scene``: 3 more points for the body-axis
+gradient; and with ``ego_mem`` instead, to price them). The machine is
 shared, so the cases take turns window by window and each keeps its best window; ratios are against ``cylinder``
 with ``geo_sincos`` measured in the same rounds.
 """
@@ -48,6 +50,9 @@ VIEWS = {
     "teacher view (geo_sincos)": ("geo_sincos",),
     "privileged views (geo_priv + critic)": ("geo_priv", "geo_priv_critic"),
     "wider privileged view (geo_priv_around + critic)": ("geo_priv_around", "geo_priv_critic"),
+    # what a generalist student's DAgger env computes: its ego view and the scene-routed teacher's view
+    "student's DAgger views (ego_mem_grad + geo_priv_scene)": ("ego_mem_grad", "geo_priv_scene"),
+    "the same with ego_mem (no body-axis gradient)": ("ego_mem", "geo_priv_scene"),
 }
 
 
