@@ -221,7 +221,8 @@ ENV = {
     "random_flow_phase": Bool(),
     "flow_strength": Key(FLOATS, size=2, null=True),  # its range is NavigationEnv's to check
     "flow_strength_full": Float(ge=0, le=1),
-    "sensor_noise": {"flow": Float(ge=0), "target": Float(ge=0), "gradient": Float(ge=0)},
+    # gradient: null (exact) by default, so runs saved before it existed resume (check_resume_settings)
+    "sensor_noise": {"flow": Float(ge=0), "target": Float(ge=0), "gradient": Float(ge=0, null=True)},
     "reward": REWARD,
 }
 

@@ -1,8 +1,11 @@
 """Sensor noise on the ego views (env.sensor_noise): what it changes, what it leaves exact, and that a noisy
 env resumes exactly."""
 
+import copy
+
 import pytest
 import torch
+from omegaconf import OmegaConf
 
 from flownav.builders import build_env, build_flow, build_task, compose_config
 from flownav.envs import ListTask, NavigationEnv
@@ -208,3 +211,36 @@ def test_the_gradient_sense_script_removes_exactly_the_gradient():
     policy, view, _ = suite.policy(script.POLICY)
     assert view == "ego_mem_grad"
     assert not torch.allclose(policy(obs), script.without_gradient(policy)(obs), atol=1e-3)
+
+
+def test_a_gradient_error_no_view_reads_draws_nothing():
+    """With only a gradient error set and no view that reads the gradient, a step draws nothing from the env's
+    generator: the random streams (the next episodes' draws) are those of exact sensors."""
+    exact, unread = make((0.0, 0.0, 0.0), n=16), make((0.0, 0.0, 0.1), n=16)
+    assert not unread.settings.noisy and unread.settings.sensor_error_width == 6
+    run(exact, 3), run(unread, 3)
+    assert torch.equal(exact.rng.get_state(), unread.rng.get_state())
+
+
+def test_a_saved_state_with_other_sensor_errors_is_refused_with_its_fix():
+    """A state saved with a gradient error (15 errors per swimmer) does not load into an env without one (6)."""
+    env = make_grad((0.1, 0.05, 0.03), n=8)
+    run(env, 2)
+    other = make_grad((0.1, 0.05, 0.0), n=8)
+    with pytest.raises(ValueError, match=r"holds 15 sensor errors per swimmer, this env 6: build it with"):
+        other.load_state_dict(env.state_dict())
+
+
+def test_runs_saved_before_the_gradient_error_existed_resume():
+    """env.sensor_noise.gradient is null by default, so a run whose saved config lacks the key resumes (the check
+    accepts a key added since at its null default), and null means exact."""
+    from flownav.checkpoint import check_resume_settings
+
+    cfg = OmegaConf.to_container(compose_config([]), resolve=True)
+    assert cfg["env"]["sensor_noise"]["gradient"] is None
+    saved = copy.deepcopy(cfg)
+    del saved["env"]["sensor_noise"]["gradient"]
+    check_resume_settings("run", {"meta": {"config": saved}}, cfg)
+    flow = build_flow(compose_config([]).flow)
+    env = build_env(compose_config([]).env, flow, build_task(compose_config([]).task, flow), ["ego_mem_grad"], 4)
+    assert env.settings.sensor_noise == (0.0, 0.0, 0.0)

@@ -95,15 +95,22 @@ class Settings:
     sensor_noise: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
+    def gradient_noisy(self) -> bool:
+        """Whether a view reads the body-axis gradient and it errs."""
+        return self.sensor_noise[2] > 0 and needs_body_gradient(self.views)
+
+    @property
     def noisy(self) -> bool:
-        """Whether the ego views read noisy sensors (any view does and a standard deviation is set)."""
-        return any(self.sensor_noise) and any(v in SENSED_VIEWS for v in self.views)
+        """Whether the ego views read noisy sensors: an ego view and a flow or to-target error, or the gradient's
+        view and its error (a gradient error that no view reads draws nothing: the random streams stay as they were)."""
+        sensed = any(self.sensor_noise[:2]) and any(v in SENSED_VIEWS for v in self.views)
+        return sensed or self.gradient_noisy
 
     @property
     def sensor_error_width(self) -> int:
         """Standard-normal errors per reading: flow (3) and to-target (3), plus the gradient's (9) when it errs and a
         view reads it (so an env whose views read no gradient draws what it would without the gradient's noise)."""
-        return 6 + 9 * (self.sensor_noise[2] > 0 and needs_body_gradient(self.views))
+        return 6 + 9 * self.gradient_noisy
 
 
 @dataclass

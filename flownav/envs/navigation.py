@@ -170,6 +170,12 @@ class NavigationEnv(EnvBase):
                 f"the saved env state has {state['num_envs']} swimmers and a memory ring of "
                 f"{tuple(state['flow_ring'].shape)}; this env has {self.num_envs} and {tuple(ring.shape)}"
             )
+        width = self.settings.sensor_error_width
+        if "sensor_error" in state and state["sensor_error"].shape[-1] != width:
+            raise ValueError(
+                f"the saved env state holds {state['sensor_error'].shape[-1]} sensor errors per swimmer, this env "
+                f"{width}: build it with the saved run's env.sensor_noise (a gradient error needs 15, else 6)"
+            )
         # Env states saved before sensor noise, geo_priv_around or the body-axis gradient existed hold no
         # sensor_error (exact sensors: zeros), flow_around (no view read it) or body_flow_grad (zeros until the next
         # step senses it: an ego_mem_grad run saved then read the inertial gradient and resumes only approximately).
