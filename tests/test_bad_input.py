@@ -143,7 +143,7 @@ CASES = [
     (
         "gradient_noise_negative",
         train_case("env.sensor_noise.gradient=-0.02"),
-        "env.sensor_noise.gradient must be >= 0, a finite number; got -0.02",
+        "env.sensor_noise.gradient must be >= 0, a finite number or null; got -0.02",
     ),
     (
         "hidden_zero",
