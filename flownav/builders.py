@@ -223,7 +223,7 @@ def build_env(
     schema.check_env(env_cfg)
     reward = env_cfg.get("reward", {}) or {}
     strength = env_cfg.get("flow_strength")
-    noise = env_cfg.get("sensor_noise") or {}
+    noise, bias = env_cfg.get("sensor_noise") or {}, env_cfg.get("sensor_bias") or {}
     try:
         return NavigationEnv(
             flow,
@@ -240,6 +240,7 @@ def build_env(
             flow_strength=None if strength is None else tuple(float(v) for v in strength),
             flow_strength_full=float(env_cfg.get("flow_strength_full") or 0.0),
             sensor_noise=tuple(float(noise.get(key) or 0.0) for key in ("flow", "target", "gradient")),
+            sensor_bias=tuple(float(bias.get(key) or 0.0) for key in ("flow", "target", "gradient")),
             seed=seed,
             device=device,
         )

@@ -146,6 +146,11 @@ CASES = [
         "env.sensor_noise.gradient must be >= 0, a finite number or null; got -0.02",
     ),
     (
+        "sensor_bias_negative",
+        train_case("env.sensor_bias.flow=-0.1"),
+        "env.sensor_bias.flow must be >= 0, a finite number or null; got -0.1",
+    ),
+    (
         "hidden_zero",
         train_case("algo.actor.hidden=[0]"),
         "algo.actor.hidden must be a non-empty list of integers, each >= 1; got [0]",

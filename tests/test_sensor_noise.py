@@ -26,11 +26,13 @@ def swirl():
     )
 
 
-def make(noise, n=4096, seed=3):
+def make(noise, n=4096, seed=3, bias=(0.0, 0.0, 0.0), views=VIEWS):
     g = torch.Generator().manual_seed(0)
     start = torch.rand(n, 3, generator=g) * 10
     task = ListTask(start.tolist(), (start + torch.randn(n, 3, generator=g) * 5).tolist())
-    return NavigationEnv(swirl(), task, num_envs=n, views=VIEWS, time_limit=100.0, sensor_noise=noise, seed=seed)
+    return NavigationEnv(
+        swirl(), task, num_envs=n, views=views, time_limit=100.0, sensor_noise=noise, sensor_bias=bias, seed=seed
+    )
 
 
 def run(env, steps, seed=1):
@@ -232,15 +234,57 @@ def test_a_saved_state_with_other_sensor_errors_is_refused_with_its_fix():
 
 
 def test_runs_saved_before_the_gradient_error_existed_resume():
-    """env.sensor_noise.gradient is null by default, so a run whose saved config lacks the key resumes (the check
-    accepts a key added since at its null default), and null means exact."""
+    """env.sensor_noise.gradient and env.sensor_bias are null by default, so a run whose saved config lacks them
+    resumes (the check accepts a key added since at its null default), and null means exact."""
     from flownav.checkpoint import check_resume_settings
 
     cfg = OmegaConf.to_container(compose_config([]), resolve=True)
     assert cfg["env"]["sensor_noise"]["gradient"] is None
     saved = copy.deepcopy(cfg)
-    del saved["env"]["sensor_noise"]["gradient"]
+    del saved["env"]["sensor_noise"]["gradient"], saved["env"]["sensor_bias"]
     check_resume_settings("run", {"meta": {"config": saved}}, cfg)
     flow = build_flow(compose_config([]).flow)
     env = build_env(compose_config([]).env, flow, build_task(compose_config([]).task, flow), ["ego_mem_grad"], 4)
     assert env.settings.sensor_noise == (0.0, 0.0, 0.0)
+
+
+def test_a_bias_is_drawn_once_per_episode_with_its_spread():
+    """env.sensor_bias: each swimmer's flow reading and gradient err by the same vector at every step of its episode,
+    spread sigma across swimmers; a new episode draws a new one. With a fresh noise as well, the first readings'
+    fresh errors are those without the bias (the bias is drawn after them)."""
+    exact = run(make((0.0, 0.0, 0.0), views=GRADIENT_VIEWS + ("ego_flow",)), 6)
+    biased_env = make((0.0, 0.0, 0.0), bias=(0.2, 0.0, 0.03), views=GRADIENT_VIEWS + ("ego_flow",))
+    biased = run(biased_env, 6)
+    for a, b in zip(exact, biased, strict=True):
+        assert torch.equal(a["position"], b["position"]) and torch.equal(a["geo_priv"], b["geo_priv"])
+    inertial = lambda td: torch.einsum("bij,bj->bi", _frames(td["heading"]), td["ego_flow"][:, 3:])  # noqa: E731
+    flow_errors = [inertial(b) - inertial(a) for a, b in zip(exact, biased, strict=True)]
+    assert torch.allclose(flow_errors[1], flow_errors[5], atol=1e-5)  # the same error all episode long
+    assert flow_errors[5].std().item() == pytest.approx(0.2, rel=0.05)
+    gradient_error = biased[5]["ego_mem_grad"][:, -9:] - exact[5]["ego_mem_grad"][:, -9:]
+    assert gradient_error.std().item() == pytest.approx(0.03, rel=0.05)
+    before = biased_env.state.sensor_bias.clone()
+    biased_env.reset()
+    assert not torch.allclose(before, biased_env.state.sensor_bias)
+    noisy, both = make((0.1, 0.05, 0.0)).reset(), make((0.1, 0.05, 0.0), bias=(0.1, 0.0, 0.0)).reset()
+    target = lambda td: td["ego_flow"][:, :3]  # noqa: E731
+    assert torch.equal(target(noisy), target(both))  # no to-target bias: its fresh error is the one without a bias
+
+
+def test_a_biased_env_resumes_exactly_and_the_key_reaches_it():
+    """The episode's bias is part of the saved state; env.sensor_bias.{flow,target,gradient} is the env's."""
+    env = make((0.0, 0.0, 0.0), n=32, bias=(0.1, 0.05, 0.02), views=GRADIENT_VIEWS)
+    run(env, 4)
+    twin = make((0.0, 0.0, 0.0), n=32, seed=99, bias=(0.1, 0.05, 0.02), views=GRADIENT_VIEWS)
+    twin.reset()
+    twin.load_state_dict(env.state_dict())
+    action = torch.full((32, 3), 0.5)
+    a, b = (e.step(e._observe().set("action", action))["next"] for e in (env, twin))
+    assert torch.equal(a["ego_mem_grad"], b["ego_mem_grad"])
+    keys = ["env.sensor_bias.flow=0.1", "env.sensor_bias.target=0.02", "env.sensor_bias.gradient=0.01"]
+    cfg = compose_config(["obs=ego_mem", *keys])
+    flow = build_flow(cfg.flow)
+    built = build_env(cfg.env, flow, build_task(cfg.task, flow), ["ego_mem"], num_envs=4)
+    assert built.settings.sensor_bias == (0.1, 0.02, 0.01) and built.settings.biased
+    with pytest.raises(ValueError, match=r"sensor_bias is \(flow, target, gradient\)"):
+        NavigationEnv(swirl(), num_envs=2, sensor_bias=(0.0, -1.0, 0.0))

@@ -76,8 +76,8 @@ class Settings:
     (each episode's factor on ``swim_speed_scale``). views: the observation views (they decide what is sensed).
     max_steps: the time limit in steps. misalignment_deg: the scene turned about z through ``rotation_center``.
     flow_strength: ``(low, high)`` of each episode's factor on the flow, or None; flow_strength_full: the share
-    of episodes at 1. sensor_noise: ``(flow, target, gradient)`` standard deviations of the ego views' sensors
-    (:func:`draw_sensor_error`).
+    of episodes at 1. sensor_noise: ``(flow, target, gradient)`` standard deviations of the ego views' sensors'
+    errors drawn fresh each step, sensor_bias: of their errors drawn once per episode (:func:`draw_sensor_error`).
     """
 
     task: object
@@ -93,18 +93,25 @@ class Settings:
     flow_strength: tuple[float, float] | None = None
     flow_strength_full: float = 0.0
     sensor_noise: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    sensor_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def gradient_noisy(self) -> bool:
-        """Whether a view reads the body-axis gradient and it errs."""
-        return self.sensor_noise[2] > 0 and needs_body_gradient(self.views)
+        """Whether a view reads the body-axis gradient and it errs (fresh each step or per episode)."""
+        errs = self.sensor_noise[2] > 0 or self.sensor_bias[2] > 0
+        return errs and needs_body_gradient(self.views)
 
     @property
     def noisy(self) -> bool:
-        """Whether the ego views read noisy sensors: an ego view and a flow or to-target error, or the gradient's
+        """Whether the ego views read erring sensors: an ego view and a flow or to-target error, or the gradient's
         view and its error (a gradient error that no view reads draws nothing: the random streams stay as they were)."""
-        sensed = any(self.sensor_noise[:2]) and any(v in SENSED_VIEWS for v in self.views)
-        return sensed or self.gradient_noisy
+        errs = any(self.sensor_noise[:2]) or any(self.sensor_bias[:2])
+        return (errs and any(v in SENSED_VIEWS for v in self.views)) or self.gradient_noisy
+
+    @property
+    def biased(self) -> bool:
+        """Whether the sensors err by a per-episode bias as well (drawn at reset)."""
+        return self.noisy and any(self.sensor_bias)
 
     @property
     def sensor_error_width(self) -> int:
@@ -146,6 +153,7 @@ class Swimmers:
     scene: Tensor  # [B] int64 the episode's paper-scene code (:func:`paper_scene`; the scene view), set at reset
     sensor_error: Tensor  # [B, 6 or 15] standard-normal errors of the last reading: flow (3), to-target (3),
     # body-axis gradient (9, with a gradient error; Settings.sensor_error_width); zeros if exact
+    sensor_bias: Tensor  # [B, 6 or 15] the same, drawn once per episode (Settings.sensor_bias); zeros without
 
 
 STATE_FIELDS = tuple(f.name for f in fields(Swimmers))
@@ -205,6 +213,7 @@ def initial_state(num_envs: int, settings: Settings, device) -> Swimmers:
         flow_around=z(len(AROUND_OFFSETS), 3),
         scene=torch.zeros(num_envs, dtype=torch.int64, device=device),
         sensor_error=z(settings.sensor_error_width),
+        sensor_bias=z(settings.sensor_error_width),
     )
 
 
@@ -300,11 +309,13 @@ def reset(state: Swimmers, idx: Tensor, flow: FlowField, settings: Settings, rng
     require_finite(flow_vel, "the flow velocity at the start", FLOW_FIX, ep.start)
     d = flow.displacement(ep.start, ep.target).norm(dim=-1)
     zero, zero_int = torch.zeros_like(d), torch.zeros_like(idx)
-    error = state.sensor_error
+    error, bias = state.sensor_error, state.sensor_bias
     if settings.noisy:  # drawn last: exact sensors keep the random streams of the other draws
         error = put(error, draw_sensor_error(idx.numel(), rng, settings.sensor_error_width))
+    if settings.biased:  # after the fresh errors: sensors without a bias keep their streams
+        bias = put(bias, draw_sensor_error(idx.numel(), rng, settings.sensor_error_width))
     if state.flow_ring.shape[1]:  # no past yet: the swimmer has been sensing its start flow
-        state.flow_ring[idx] = sensed_flow(flow_vel, error[idx], settings)[:, None, :]
+        state.flow_ring[idx] = sensed_flow(flow_vel, error[idx], bias[idx], settings)[:, None, :]
     state = replace(
         state,
         pos=put(state.pos, ep.start),
@@ -324,6 +335,7 @@ def reset(state: Swimmers, idx: Tensor, flow: FlowField, settings: Settings, rng
         strength=strength,
         swim_scale=swim_scale,
         sensor_error=error,
+        sensor_bias=bias,
         **{key: getattr(state, key).index_put((idx,), value) for key, value in privileged.items()},
     )
     return keep_scene(state, flow, settings, idx)
@@ -334,17 +346,30 @@ def draw_sensor_error(n: int, rng: torch.Generator, width: int = 6) -> Tensor:
     with ``width`` 15, the gradient sensor's (9). The ego views read the flow as u + sigma_flow e (the total velocity
     as the exactly known swim velocity plus that reading; the memory keeps the readings as sensed), the to-target
     vector d as d + sigma_target |d| e (a relative range and bearing error) and each component of the body-axis
-    gradient as G_ij + sigma_gradient e_ij; one fresh draw per step (:func:`sensed_state`). The gradient's errors
-    are drawn after the others: without them a draw is what it was before the gradient could err."""
+    gradient as G_ij + sigma_gradient e_ij; one fresh draw per step (:func:`sensed_state`), and with a bias one
+    more per episode, b, added as sigma_bias b (:func:`reading_error`). The gradient's errors are drawn after the
+    others: without them a draw is what it was before the gradient could err."""
     error = torch.randn(n, 6, generator=rng, device=rng.device)
     if width == 6:
         return error
     return torch.cat((error, torch.randn(n, width - 6, generator=rng, device=rng.device)), -1)
 
 
-def sensed_flow(flow_vel: Tensor, error: Tensor, settings: Settings) -> Tensor:
-    """The flow as the ego views' sensor reads it (exact without sensor noise)."""
-    return flow_vel + settings.sensor_noise[0] * error[:, :3] if settings.noisy else flow_vel
+FLOW_SENSOR, TARGET_SENSOR, GRADIENT_SENSOR = 0, 1, 2
+SENSOR_COLUMNS = (slice(0, 3), slice(3, 6), slice(6, 15))  # of draw_sensor_error's draws
+
+
+def reading_error(sensor: int, error: Tensor, bias: Tensor, settings: Settings, scale: Tensor | float = 1.0) -> Tensor:
+    """A sensor's error from its standard-normal draws: (sigma_noise scale) e + (sigma_bias scale) b, ``scale`` the
+    reading's length for the relative to-target error (no bias term without a bias: exact as before it existed)."""
+    cols = SENSOR_COLUMNS[sensor]
+    out = settings.sensor_noise[sensor] * scale * error[:, cols]
+    return out + settings.sensor_bias[sensor] * scale * bias[:, cols] if settings.biased else out
+
+
+def sensed_flow(flow_vel: Tensor, error: Tensor, bias: Tensor, settings: Settings) -> Tensor:
+    """The flow as the ego views' sensor reads it (exact without sensor errors)."""
+    return flow_vel + reading_error(FLOW_SENSOR, error, bias, settings) if settings.noisy else flow_vel
 
 
 def keep_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tensor) -> Swimmers:
@@ -381,7 +406,7 @@ def step(
     ring_ptr = state.ring_ptr
     if state.flow_ring.shape[1]:
         ring_ptr = (ring_ptr + 1) % state.flow_ring.shape[1]
-        state.flow_ring[:, ring_ptr] = sensed_flow(flow_vel, error, settings)
+        state.flow_ring[:, ring_ptr] = sensed_flow(flow_vel, error, state.sensor_bias, settings)
 
     radius = settings.reward.success_radius
     dist = flow.displacement(pos, state.target).norm(dim=-1)
@@ -503,16 +528,16 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
 
 
 def sensed_state(seen: State, state: Swimmers, settings: Settings) -> State:
-    """What the ego views read with noisy sensors (:func:`draw_sensor_error`): the flow reading with its error,
+    """What the ego views read with erring sensors (:func:`reading_error`): the flow reading with its error,
     the total velocity as the swim velocity plus that reading, the to-target vector with its relative error, the
     body-axis gradient with its error (the memory already holds the readings as sensed)."""
-    flow_noise, target_noise, gradient_noise = settings.sensor_noise
-    flow_error = flow_noise * state.sensor_error[:, :3]
+    error, bias = state.sensor_error, state.sensor_bias
+    flow_error = reading_error(FLOW_SENSOR, error, bias, settings)
     d = seen.to_target
-    d_error = target_noise * d.norm(dim=-1, keepdim=True) * state.sensor_error[:, 3:6]
+    d_error = reading_error(TARGET_SENSOR, error, bias, settings, d.norm(dim=-1, keepdim=True))
     sensed = replace(seen, flow=seen.flow + flow_error, velocity=seen.velocity + flow_error, to_target=d + d_error)
-    if gradient_noise and seen.body_flow_gradient is not None:
-        gradient_error = gradient_noise * state.sensor_error[:, 6:].view(-1, 3, 3)
+    if settings.gradient_noisy and seen.body_flow_gradient is not None:
+        gradient_error = reading_error(GRADIENT_SENSOR, error, bias, settings).view(-1, 3, 3)
         sensed = replace(sensed, body_flow_gradient=seen.body_flow_gradient + gradient_error)
     return sensed
 

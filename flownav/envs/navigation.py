@@ -53,6 +53,8 @@ class NavigationEnv(EnvBase):
             the flow reading's error per component (velocity units), the to-target vector's relative to its length,
             the body-axis gradient's per component (``ego_mem_grad``; velocity per unit length)
             (:func:`flownav.envs.core.draw_sensor_error`). The geo and privileged views stay exact.
+        sensor_bias: ``(flow, target, gradient)``: standard deviations of the same sensors' errors drawn once per
+            episode (a calibration bias), added to those of ``sensor_noise``.
     """
 
     batch_locked = True
@@ -74,6 +76,7 @@ class NavigationEnv(EnvBase):
         flow_strength: tuple[float, float] | None = None,
         flow_strength_full: float = 0.0,
         sensor_noise: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        sensor_bias: tuple[float, float, float] = (0.0, 0.0, 0.0),
         seed: int | None = 0,
         device="cpu",
     ):
@@ -91,11 +94,10 @@ class NavigationEnv(EnvBase):
             raise ValueError(f"flow_strength_full is a fraction in [0, 1], got {flow_strength_full}")
         if flow_strength_full and flow_strength is None:
             raise ValueError("flow_strength_full needs flow_strength=[low, high] (the draw it replaces)")
-        sensor_noise = tuple(float(v) for v in sensor_noise)
-        if len(sensor_noise) != 3 or not all(v >= 0 for v in sensor_noise):
-            raise ValueError(
-                f"sensor_noise is (flow, target, gradient), three standard deviations >= 0; got {sensor_noise}"
-            )
+        sensor_noise, sensor_bias = (tuple(float(v) for v in sd) for sd in (sensor_noise, sensor_bias))
+        for name, sd in (("sensor_noise", sensor_noise), ("sensor_bias", sensor_bias)):
+            if len(sd) != 3 or not all(v >= 0 for v in sd):
+                raise ValueError(f"{name} is (flow, target, gradient), three standard deviations >= 0; got {sd}")
         super().__init__(device=device, batch_size=torch.Size([num_envs]))
         self.num_envs, self.views, self.time_limit = num_envs, check_views(views), float(time_limit)
         self.settings = Settings(
@@ -113,6 +115,7 @@ class NavigationEnv(EnvBase):
             flow_strength=flow_strength,
             flow_strength_full=float(flow_strength_full),
             sensor_noise=sensor_noise,
+            sensor_bias=sensor_bias,
         )
         self.flow = core.scene_flow(flow, self.settings, num_envs, self.device)
         self._make_specs()
@@ -171,15 +174,16 @@ class NavigationEnv(EnvBase):
                 f"{tuple(state['flow_ring'].shape)}; this env has {self.num_envs} and {tuple(ring.shape)}"
             )
         width = self.settings.sensor_error_width
-        if "sensor_error" in state and state["sensor_error"].shape[-1] != width:
-            raise ValueError(
-                f"the saved env state holds {state['sensor_error'].shape[-1]} sensor errors per swimmer, this env "
-                f"{width}: build it with the saved run's env.sensor_noise (a gradient error needs 15, else 6)"
-            )
+        for key in ("sensor_error", "sensor_bias"):
+            if key in state and state[key].shape[-1] != width:
+                raise ValueError(
+                    f"the saved env state holds {state[key].shape[-1]} sensor errors per swimmer, this env {width}: "
+                    "build it with the saved run's env.sensor_noise and sensor_bias (a gradient error needs 15, else 6)"
+                )
         # Env states saved before sensor noise, geo_priv_around or the body-axis gradient existed hold no
         # sensor_error (exact sensors: zeros), flow_around (no view read it) or body_flow_grad (zeros until the next
         # step senses it: an ego_mem_grad run saved then read the inertial gradient and resumes only approximately).
-        keep = ("sensor_error", "flow_around", "body_flow_grad")
+        keep = ("sensor_error", "sensor_bias", "flow_around", "body_flow_grad")
         state = {k: getattr(self.state, k) for k in keep} | dict(state)
         saved = {k: state[k].to(self.device).clone() if torch.is_tensor(state[k]) else state[k] for k in SAVED_FIELDS}
         self.state = core.Swimmers(**saved, scene=self.state.scene)
