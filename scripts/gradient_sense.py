@@ -1,12 +1,13 @@
 """What the flow-gradient sense gives the shipped student, and what an error on it costs: ``generalist_student``
 (view ``ego_mem_grad``) on the paper's task and on the validation set's cases, with its gradient as sensed, with a
-fresh error of each standard deviation on every gradient component at every step (``env.sensor_noise.gradient``;
-the flow and to-target readings exact), and with the gradient input set to zero (the sense removed; the policy's
+fresh error of each standard deviation on every gradient component at every step (``env.sensor_noise.gradient``),
+with an error of each standard deviation drawn once per episode (``env.sensor_bias.gradient``: a calibration bias)
+(the flow and to-target readings exact), and with the gradient input set to zero (the sense removed; the policy's
 other inputs as they are). ``--rms``: the scale the noise suite's errors are set against instead, the RMS per
 component of the flow reading and of the gradient in the paper's task (2,000 swimmers of random actions, 100 steps).
 
-    python scripts/gradient_sense.py                       # 0.02 0.05 0.1 1.0, 10,000 / 2,000 episodes
-    python scripts/gradient_sense.py --noise 0.05 --episodes 1000 --validation-episodes 500
+    python scripts/gradient_sense.py                       # noise 0.02 0.05 0.1 1.0, bias 0.02 0.05 0.1, 10,000 / 2,000
+    python scripts/gradient_sense.py --noise 0.05 --bias --episodes 1000 --validation-episodes 500
     python scripts/gradient_sense.py --rms
 
 Episodes are the protocol's (evaluation seed EVAL_SEED), the same for every row of a case. docs/generalist.md quotes it.
@@ -63,20 +64,23 @@ def reading_rms(swimmers: int = 2000, steps: int = 100) -> tuple[float, float]:
     return rms(flows), rms(gradients)
 
 
-def main(noise: list[float], episodes: int, validation_episodes: int) -> None:
+def main(noise: list[float], bias: list[float], episodes: int, validation_episodes: int) -> None:
     torch.set_num_threads(1)
     suite = Suite(compose_config(["+experiment=validation"], app="evaluate"))
     policy, view, _ = suite.policy(POLICY)
     if view != "ego_mem_grad":
         raise SystemExit(f"{POLICY} reads {view!r}; this script removes ego_mem_grad's gradient")
-    rows = [("as sensed", policy, 0.0)] + [(f"gradient error {s:g}", policy, s) for s in noise]
-    rows.append(("gradient input zero", without_gradient(policy), 0.0))
+    exact = {"sensor_noise": {"gradient": 0.0}, "sensor_bias": {"gradient": 0.0}}
+    rows = [("as sensed", policy, exact)]
+    rows += [(f"gradient error {s:g}", policy, {**exact, "sensor_noise": {"gradient": s}}) for s in noise]
+    rows += [(f"gradient bias {s:g}", policy, {**exact, "sensor_bias": {"gradient": s}}) for s in bias]
+    rows.append(("gradient input zero", without_gradient(policy), exact))
     for case, (flow_cfg, task_cfg, kind) in cases(suite).items():
         flow = suite.flow(flow_cfg)
         task = build_task(task_cfg, flow)
         n = validation_episodes if kind else episodes
-        for label, act, sigma in rows:
-            env = OmegaConf.merge(suite.cfg.env, {"sensor_noise": {"gradient": sigma}})
+        for label, act, errors in rows:
+            env = OmegaConf.merge(suite.cfg.env, errors)
             r = evaluate(act, view, EvalSpec(flow, task, env, n, seed=suite.seed)).summary
             lo, hi = r["success_ci95"]
             print(f"{case} | {label}: {100 * r['success_rate']:.2f}% [{100 * lo:.2f}, {100 * hi:.2f}] of {n}")
@@ -85,6 +89,7 @@ def main(noise: list[float], episodes: int, validation_episodes: int) -> None:
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--noise", type=float, nargs="*", default=[0.02, 0.05, 0.1, 1.0])
+    parser.add_argument("--bias", type=float, nargs="*", default=[0.02, 0.05, 0.1])
     parser.add_argument("--episodes", type=int, default=10_000, help="on the paper's task")
     parser.add_argument("--validation-episodes", type=int, default=2_000, help="per validation case")
     parser.add_argument("--rms", action="store_true", help="print the readings' RMS instead")
@@ -94,4 +99,4 @@ if __name__ == "__main__":
         flow_rms, gradient_rms = reading_rms()
         print(f"RMS per component in the paper's task: flow reading {flow_rms:.3f}, gradient {gradient_rms:.3f}")
     else:
-        main(args.noise, args.episodes, args.validation_episodes)
+        main(args.noise, args.bias, args.episodes, args.validation_episodes)
