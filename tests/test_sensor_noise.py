@@ -189,12 +189,17 @@ def test_the_noise_suite_compares_only_policies_that_sense_and_applies_its_noise
         cfg = compose("config", overrides=["+experiment=sensor_noise"])
     levels = set()
     for name, suite in cfg.suite.items():
-        noise = suite.env.sensor_noise
+        kind = "sensor_bias" if name.startswith("bias") else "sensor_noise"
+        noise = suite.env[kind]
         assert noise.flow > 0 and noise.target > 0 and noise.gradient > 0, name
-        levels.add((noise.flow, noise.target, noise.gradient))
+        levels.add((kind, noise.flow, noise.target, noise.gradient))
         sensed = [cfg.policies[p].obs in SENSED_VIEWS and "checkpoint" in cfg.policies[p] for p in suite.policies]
         assert all(sensed), name
-    assert levels == {(0.1, 0.05, 0.02), (0.2, 0.1, 0.04)}
+    assert levels == {
+        ("sensor_noise", 0.1, 0.05, 0.02),
+        ("sensor_noise", 0.2, 0.1, 0.04),
+        ("sensor_bias", 0.1, 0.05, 0.02),
+    }
     assert "generalist_student_noisy" in cfg.suite.noise_020_paper.policies
 
 
