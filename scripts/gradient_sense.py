@@ -1,13 +1,13 @@
 """What the flow-gradient sense gives the shipped student, and what an error on it costs: ``generalist_student``
 (view ``ego_mem_grad``) on the paper's task and on the validation set's cases, with its gradient as sensed, with a
 fresh error of each standard deviation on every gradient component at every step (``env.sensor_noise.gradient``),
-with an error of each standard deviation drawn once per episode (``env.sensor_bias.gradient``: a calibration bias)
+with an error of each standard deviation drawn once per episode (``env.sensor_bias.gradient``: a steady bias)
 (the flow and to-target readings exact), and with the gradient input set to zero (the sense removed; the policy's
 other inputs as they are). ``--rms``: the scale the noise suite's errors are set against instead, the RMS per
 component of the flow reading and of the gradient in the paper's task (2,000 swimmers of random actions, 100 steps).
 
     python scripts/gradient_sense.py                       # noise 0.02 0.05 0.1 1.0, bias 0.02 0.05 0.1, 10,000 / 2,000
-    python scripts/gradient_sense.py --noise 0.05 --bias --episodes 1000 --validation-episodes 500
+    python scripts/gradient_sense.py --noise 0.05 --bias 0.05 --episodes 1000 --validation-episodes 500
     python scripts/gradient_sense.py --rms
 
 Episodes are the protocol's (evaluation seed EVAL_SEED), the same for every row of a case. docs/generalist.md quotes it.

@@ -254,26 +254,53 @@ def test_runs_saved_before_the_gradient_error_existed_resume():
 
 
 def test_a_bias_is_drawn_once_per_episode_with_its_spread():
-    """env.sensor_bias: each swimmer's flow reading and gradient err by the same vector at every step of its episode,
-    spread sigma across swimmers; a new episode draws a new one. With a fresh noise as well, the first readings'
-    fresh errors are those without the bias (the bias is drawn after them)."""
-    exact = run(make((0.0, 0.0, 0.0), views=GRADIENT_VIEWS + ("ego_flow",)), 6)
-    biased_env = make((0.0, 0.0, 0.0), bias=(0.2, 0.0, 0.03), views=GRADIENT_VIEWS + ("ego_flow",))
+    """env.sensor_bias: each swimmer's readings err by the same bias at every step of its episode, in the reading's
+    frame: the flow reading and its memory by one world-frame vector, the to-target vector by one world-frame vector
+    times its length, the gradient by one matrix of body-axis components; spread sigma across swimmers; a new
+    episode draws a new one. With a fresh noise as well, the first readings' fresh errors are those without it."""
+    views = GRADIENT_VIEWS + ("ego_flow", "ego_mem")
+    exact = run(make((0.0, 0.0, 0.0), views=views), 6)
+    biased_env = make((0.0, 0.0, 0.0), bias=(0.2, 0.05, 0.03), views=views)
     biased = run(biased_env, 6)
     for a, b in zip(exact, biased, strict=True):
         assert torch.equal(a["position"], b["position"]) and torch.equal(a["geo_priv"], b["geo_priv"])
-    inertial = lambda td: torch.einsum("bij,bj->bi", _frames(td["heading"]), td["ego_flow"][:, 3:])  # noqa: E731
-    flow_errors = [inertial(b) - inertial(a) for a, b in zip(exact, biased, strict=True)]
-    assert torch.allclose(flow_errors[1], flow_errors[5], atol=1e-5)  # the same error all episode long
-    assert flow_errors[5].std().item() == pytest.approx(0.2, rel=0.05)
-    gradient_error = biased[5]["ego_mem_grad"][:, -9:] - exact[5]["ego_mem_grad"][:, -9:]
-    assert gradient_error.std().item() == pytest.approx(0.03, rel=0.05)
+    world = lambda td, v: torch.einsum("bij,bj->bi", _frames(td["heading"]), v)  # noqa: E731  body -> world
+    flow = [world(b, b["ego_flow"][:, 3:]) - world(a, a["ego_flow"][:, 3:]) for a, b in zip(exact, biased, strict=True)]
+    memory = [
+        world(b, b["ego_mem"][:, 8:11]) - world(a, a["ego_mem"][:, 8:11]) for a, b in zip(exact, biased, strict=True)
+    ]
+    target = [
+        (world(b, b["ego_flow"][:, :3]) - world(a, a["ego_flow"][:, :3]))
+        / a["ego_flow"][:, :3].norm(dim=-1, keepdim=True)
+        for a, b in zip(exact, biased, strict=True)
+    ]
+    gradient = [b["ego_mem_grad"][:, -9:] - a["ego_mem_grad"][:, -9:] for a, b in zip(exact, biased, strict=True)]
+    for errors, sigma in ((flow, 0.2), (memory, 0.2), (target, 0.05), (gradient, 0.03)):
+        assert torch.allclose(errors[1], errors[5], atol=1e-4)  # the same error all episode long
+        assert errors[5].std().item() == pytest.approx(sigma, rel=0.05)
+    assert torch.allclose(memory[5], flow[5], atol=1e-5)  # the memory holds the readings as sensed
     before = biased_env.state.sensor_bias.clone()
     biased_env.reset()
     assert not torch.allclose(before, biased_env.state.sensor_bias)
     noisy, both = make((0.1, 0.05, 0.0)).reset(), make((0.1, 0.05, 0.0), bias=(0.1, 0.0, 0.0)).reset()
-    target = lambda td: td["ego_flow"][:, :3]  # noqa: E731
-    assert torch.equal(target(noisy), target(both))  # no to-target bias: its fresh error is the one without a bias
+    assert torch.equal(noisy["ego_flow"][:, :3], both["ego_flow"][:, :3])  # no to-target bias: the same fresh error
+
+
+def test_a_bias_no_view_reads_draws_nothing_and_null_is_none():
+    """A gradient bias with views that read no gradient changes nothing (readings and streams); a gradient bias alone
+    reaches the gradient's view; the default config has no bias."""
+    a, b = make((0.1, 0.05, 0.0), n=64), make((0.1, 0.05, 0.0), n=64, bias=(0.0, 0.0, 0.05))
+    assert not b.settings.biased
+    for x, y in zip(run(a, 4), run(b, 4), strict=True):
+        assert torch.equal(x["ego_mem"], y["ego_mem"])
+    assert torch.equal(a.rng.get_state(), b.rng.get_state())
+    only = make((0.0, 0.0, 0.0), n=64, bias=(0.0, 0.0, 0.05), views=GRADIENT_VIEWS)
+    exact = make((0.0, 0.0, 0.0), n=64, views=GRADIENT_VIEWS)
+    assert only.settings.biased and not torch.equal(run(only, 2)[-1]["ego_mem_grad"], run(exact, 2)[-1]["ego_mem_grad"])
+    cfg = compose_config(["obs=ego_mem_grad"])
+    flow = build_flow(cfg.flow)
+    env = build_env(cfg.env, flow, build_task(cfg.task, flow), ["ego_mem_grad"], num_envs=4)
+    assert env.settings.sensor_bias == (0.0, 0.0, 0.0) and not env.settings.biased and not env.settings.noisy
 
 
 def test_a_biased_env_resumes_exactly_and_the_key_reaches_it():

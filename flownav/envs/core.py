@@ -110,8 +110,10 @@ class Settings:
 
     @property
     def biased(self) -> bool:
-        """Whether the sensors err by a per-episode bias as well (drawn at reset)."""
-        return self.noisy and any(self.sensor_bias)
+        """Whether a sensor that a view reads errs by a per-episode bias as well (drawn at reset; a bias no view
+        reads draws nothing)."""
+        sensed = any(self.sensor_bias[:2]) and any(v in SENSED_VIEWS for v in self.views)
+        return sensed or (self.sensor_bias[2] > 0 and needs_body_gradient(self.views))
 
     @property
     def sensor_error_width(self) -> int:

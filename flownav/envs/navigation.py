@@ -54,7 +54,8 @@ class NavigationEnv(EnvBase):
             the body-axis gradient's per component (``ego_mem_grad``; velocity per unit length)
             (:func:`flownav.envs.core.draw_sensor_error`). The geo and privileged views stay exact.
         sensor_bias: ``(flow, target, gradient)``: standard deviations of the same sensors' errors drawn once per
-            episode (a calibration bias), added to those of ``sensor_noise``.
+            episode (a steady bias: the flow reading's and the to-target vector's fixed in the world frame, the
+            gradient's per body-axis component), added to those of ``sensor_noise``.
     """
 
     batch_locked = True
@@ -180,9 +181,10 @@ class NavigationEnv(EnvBase):
                     f"the saved env state holds {state[key].shape[-1]} sensor errors per swimmer, this env {width}: "
                     "build it with the saved run's env.sensor_noise and sensor_bias (a gradient error needs 15, else 6)"
                 )
-        # Env states saved before sensor noise, geo_priv_around or the body-axis gradient existed hold no
-        # sensor_error (exact sensors: zeros), flow_around (no view read it) or body_flow_grad (zeros until the next
-        # step senses it: an ego_mem_grad run saved then read the inertial gradient and resumes only approximately).
+        # Env states saved before sensor errors, geo_priv_around or the body-axis gradient existed hold no
+        # sensor_error or sensor_bias (exact sensors: zeros), flow_around (no view read it) or body_flow_grad (zeros
+        # until the next step senses it: an ego_mem_grad run saved then read the inertial gradient and resumes only
+        # approximately).
         keep = ("sensor_error", "sensor_bias", "flow_around", "body_flow_grad")
         state = {k: getattr(self.state, k) for k in keep} | dict(state)
         saved = {k: state[k].to(self.device).clone() if torch.is_tensor(state[k]) else state[k] for k in SAVED_FIELDS}

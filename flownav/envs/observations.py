@@ -49,8 +49,9 @@
   left (what decides truncation, hence the value) and the flow velocity at the target.
 
 Sensor noise (``env.sensor_noise``, off by default) applies to the ego views only, the swimmer's on-board
-sensors (``SENSED_VIEWS``): the geo and privileged views are what the simulator knows, exactly. ``ego_mem_grad``'s
-gradient errs only with its own standard deviation (``env.sensor_noise.gradient``).
+sensors (``SENSED_VIEWS``), and so does a per-episode bias (``env.sensor_bias``): the geo and privileged views are
+what the simulator knows, exactly. ``ego_mem_grad``'s gradient errs only with its own standard deviations
+(``env.sensor_noise.gradient``, ``env.sensor_bias.gradient``).
 """
 
 from __future__ import annotations
