@@ -124,10 +124,7 @@ GRADIENT_VIEWS = ("geo_priv", "ego_mem_grad")
 
 def make_grad(noise, n=4096, seed=3):
     """make() with the view that senses the flow's gradient along the body axes."""
-    env = make(noise, n, seed)
-    return NavigationEnv(
-        env.flow, env.settings.task, num_envs=n, views=GRADIENT_VIEWS, time_limit=100.0, sensor_noise=noise, seed=seed
-    )
+    return make(noise, n, seed, views=GRADIENT_VIEWS)
 
 
 def test_the_gradient_errs_only_with_its_own_noise_and_with_its_spread():

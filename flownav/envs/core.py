@@ -95,25 +95,26 @@ class Settings:
     sensor_noise: tuple[float, float, float] = (0.0, 0.0, 0.0)
     sensor_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
+    def _read_with_error(self, sd: tuple[float, float, float]) -> bool:
+        """Whether a view reads a sensor to which ``(flow, target, gradient)`` standard deviations give an error: an
+        error no view reads draws nothing, so the random streams stay as they were without it."""
+        ego = any(v in SENSED_VIEWS for v in self.views)
+        return (ego and any(sd[:2])) or (sd[2] > 0 and needs_body_gradient(self.views))
+
     @property
     def gradient_noisy(self) -> bool:
         """Whether a view reads the body-axis gradient and it errs (fresh each step or per episode)."""
-        errs = self.sensor_noise[2] > 0 or self.sensor_bias[2] > 0
-        return errs and needs_body_gradient(self.views)
+        return self._read_with_error((0.0, 0.0, self.sensor_noise[2] + self.sensor_bias[2]))
 
     @property
     def noisy(self) -> bool:
-        """Whether the ego views read erring sensors: an ego view and a flow or to-target error, or the gradient's
-        view and its error (a gradient error that no view reads draws nothing: the random streams stay as they were)."""
-        errs = any(self.sensor_noise[:2]) or any(self.sensor_bias[:2])
-        return (errs and any(v in SENSED_VIEWS for v in self.views)) or self.gradient_noisy
+        """Whether the ego views read erring sensors (fresh errors, a per-episode bias or both)."""
+        return self._read_with_error(self.sensor_noise) or self.biased
 
     @property
     def biased(self) -> bool:
-        """Whether a sensor that a view reads errs by a per-episode bias as well (drawn at reset; a bias no view
-        reads draws nothing)."""
-        sensed = any(self.sensor_bias[:2]) and any(v in SENSED_VIEWS for v in self.views)
-        return sensed or (self.sensor_bias[2] > 0 and needs_body_gradient(self.views))
+        """Whether a sensor that a view reads errs by a per-episode bias as well (drawn at reset)."""
+        return self._read_with_error(self.sensor_bias)
 
     @property
     def sensor_error_width(self) -> int:
@@ -343,7 +344,7 @@ def reset(state: Swimmers, idx: Tensor, flow: FlowField, settings: Settings, rng
     return keep_scene(state, flow, settings, idx)
 
 
-def draw_sensor_error(n: int, rng: torch.Generator, width: int = 6) -> Tensor:
+def draw_sensor_error(n: int, rng: torch.Generator, width: int) -> Tensor:
     """Standard-normal errors of n readings, ``[n, width]``: the flow sensor's (3), the to-target sensor's (3) and,
     with ``width`` 15, the gradient sensor's (9). The ego views read the flow as u + sigma_flow e (the total velocity
     as the exactly known swim velocity plus that reading; the memory keeps the readings as sensed), the to-target
