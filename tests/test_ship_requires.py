@@ -79,10 +79,13 @@ def test_no_seed_passing_is_refused_with_the_failed_check_named(seeds, experimen
                 str(tmp_path / "x.pt"),
             ]
         )
-    err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].endswith(
+    printed = capsys.readouterr()
+    last_line = printed.err.strip().splitlines()[-1]
+    assert last_line.endswith(
         f"shipping refused: no checkpoint passes its experiment's ship_requires ({fast}: headwind (0.0000 < 0.99))"
     )
+    # Every seed's numbers stay on screen: a refused ship writes no shipped results file to read them from.
+    assert f"{fast}: success " in printed.out and "  headwind: 0.0000 (at least 0.99)" in printed.out
 
 
 def test_a_check_is_measured_on_the_protocols_episodes(seeds, experiments):

@@ -113,6 +113,7 @@ def select(args) -> dict:
             require_shippable(load_checkpoint(p), p)
     torch.set_num_threads(args.threads)
     runs = [evaluate_checkpoint(p, args.episodes, args.override, args.chunk) for p in args.checkpoints]
+    print_runs(runs)
     m, s = _mean_std([r["success_rate"] for r in runs])
     mt, _ = _mean_std([r["mean_success_time"] for r in runs])
     out = {"name": args.name} | provenance(f"{PROG} " + " ".join(shlex.quote(a) for a in sys.argv[1:]))
@@ -137,11 +138,16 @@ def select(args) -> dict:
         print(f"shipped {best['checkpoint']} ({best['success_rate']:.4f}) -> {args.ship}")
     atomic_write_text(args.out, json.dumps(out, indent=2))
     print(json.dumps({k: v for k, v in out.items() if k != "runs"}, indent=2))
+    return out
+
+
+def print_runs(runs) -> None:
+    """Each checkpoint's held-out success and checks, printed before any shipping decision (a refused ship keeps
+    them on screen: it writes no shipped results file)."""
     for r in runs:
         print(f"{r['checkpoint']}: success {r['success_rate']:.4f}, mean success time {r['mean_success_time']}")
         for key, c in r["requirements"].items():
             print(f"  {key}: {c['success_rate']:.4f} (at least {c['min_success']})")
-    return out
 
 
 def main(argv=None):
