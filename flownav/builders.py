@@ -241,6 +241,7 @@ def build_env(
             flow_strength_full=float(env_cfg.get("flow_strength_full") or 0.0),
             sensor_noise=tuple(float(noise.get(key) or 0.0) for key in ("flow", "target", "gradient")),
             sensor_bias=tuple(float(bias.get(key) or 0.0) for key in ("flow", "target", "gradient")),
+            sensor_bias_frame=bias.get("frame") or "world",
             seed=seed,
             device=device,
         )

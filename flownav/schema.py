@@ -223,7 +223,8 @@ ENV = {
     "flow_strength_full": Float(ge=0, le=1),
     # gradient: null (exact) by default, so runs saved before it existed resume (check_resume_settings)
     "sensor_noise": {"flow": Float(ge=0), "target": Float(ge=0), "gradient": Float(ge=0, null=True)},
-    "sensor_bias": {k: Float(ge=0, null=True) for k in ("flow", "target", "gradient")},  # null: none (resumes)
+    "sensor_bias": {k: Float(ge=0, null=True) for k in ("flow", "target", "gradient")}  # null: none (resumes)
+    | {"frame": Str(choices=("world", "body"), null=True)},  # the flow and to-target biases' frame; null: world
     "reward": REWARD,
 }
 

@@ -151,6 +151,11 @@ CASES = [
         "env.sensor_bias.flow must be >= 0, a finite number or null; got -0.1",
     ),
     (
+        "sensor_bias_frame_unknown",
+        train_case("env.sensor_bias.frame=up"),
+        "env.sensor_bias.frame is 'up'; choose one of ['body', 'world']",
+    ),
+    (
         "hidden_zero",
         train_case("algo.actor.hidden=[0]"),
         "algo.actor.hidden must be a non-empty list of integers, each >= 1; got [0]",

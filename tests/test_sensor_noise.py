@@ -10,7 +10,7 @@ from omegaconf import OmegaConf
 from flownav.builders import build_env, build_flow, build_task, compose_config
 from flownav.envs import ListTask, NavigationEnv
 from flownav.envs.kinematics import to_body
-from flownav.envs.observations import HISTORY_LEN
+from flownav.envs.observations import HISTORY_LEN, HISTORY_STRIDE
 from flownav.flows import Box, FunctionFlow
 
 BIG = Box((-100.0, -100.0, -100.0), (100.0, 100.0, 100.0))
@@ -26,12 +26,12 @@ def swirl():
     )
 
 
-def make(noise, n=4096, seed=3, bias=(0.0, 0.0, 0.0), views=VIEWS):
+def make(noise, n=4096, seed=3, bias=(0.0, 0.0, 0.0), views=VIEWS, **kw):
     g = torch.Generator().manual_seed(0)
     start = torch.rand(n, 3, generator=g) * 10
     task = ListTask(start.tolist(), (start + torch.randn(n, 3, generator=g) * 5).tolist())
     return NavigationEnv(
-        swirl(), task, num_envs=n, views=views, time_limit=100.0, sensor_noise=noise, sensor_bias=bias, seed=seed
+        swirl(), task, num_envs=n, views=views, time_limit=100.0, sensor_noise=noise, sensor_bias=bias, seed=seed, **kw
     )
 
 
@@ -317,3 +317,51 @@ def test_a_biased_env_resumes_exactly_and_the_key_reaches_it():
     assert built.settings.sensor_bias == (0.1, 0.02, 0.01) and built.settings.biased
     with pytest.raises(ValueError, match=r"sensor_bias is \(flow, target, gradient\)"):
         NavigationEnv(swirl(), num_envs=2, sensor_bias=(0.0, -1.0, 0.0))
+
+
+def test_a_body_frame_bias_turns_with_the_swimmer():
+    """env.sensor_bias.frame=body: the flow reading's and the to-target vector's bias are fixed body-frame components
+    (a mounting offset) while the swimmer turns, so in the world frame they turn with it; the memory keeps each
+    reading as sensed (a sample from a stride back erred by the bias seen from the heading of then). The same draws
+    as the world-frame bias: the world-frame one is constant in the world frame instead. The gradient's is per body
+    axis in both."""
+    views = GRADIENT_VIEWS + ("ego_flow", "ego_mem")
+    bias = (0.2, 0.05, 0.03)
+    exact = run(make((0.0, 0.0, 0.0), views=views), 6)
+    world_env = make((0.0, 0.0, 0.0), bias=bias, views=views)
+    body_env = make((0.0, 0.0, 0.0), bias=bias, views=views, sensor_bias_frame="body")
+    world_run, body_run = run(world_env, 6), run(body_env, 6)
+    assert torch.equal(world_env.state.sensor_bias, body_env.state.sensor_bias)  # the same draws
+    to_world = lambda td, v: torch.einsum("bij,bj->bi", _frames(td["heading"]), v)  # noqa: E731  body -> world
+    for a, w, b in zip(exact, world_run, body_run, strict=True):
+        assert torch.equal(a["position"], b["position"]) and torch.equal(a["geo_priv"], b["geo_priv"])
+        flow_body = b["ego_flow"][:, 3:] - a["ego_flow"][:, 3:]
+        target_body = (b["ego_flow"][:, :3] - a["ego_flow"][:, :3]) / a["ego_flow"][:, :3].norm(dim=-1, keepdim=True)
+        assert torch.allclose(flow_body, 0.2 * body_env.state.sensor_bias[:, 0:3], atol=1e-5)
+        assert torch.allclose(target_body, 0.05 * body_env.state.sensor_bias[:, 3:6], atol=1e-5)
+        flow_world = to_world(w, w["ego_flow"][:, 3:]) - to_world(a, a["ego_flow"][:, 3:])
+        assert torch.allclose(flow_world, 0.2 * world_env.state.sensor_bias[:, 0:3], atol=1e-5)
+        assert torch.allclose(w["ego_mem_grad"][:, -9:], b["ego_mem_grad"][:, -9:])  # the gradient's: body axes
+    turned = (exact[5]["heading"] - exact[1]["heading"]).abs().sum(-1) > 0.1  # swimmers whose heading changed
+    assert turned.float().mean() > 0.5
+    world_then = to_world(exact[1], 0.2 * body_env.state.sensor_bias[:, 0:3])
+    world_now = to_world(exact[5], 0.2 * body_env.state.sensor_bias[:, 0:3])
+    assert not torch.allclose(world_then[turned], world_now[turned], atol=1e-3)  # in the world frame it turned
+    samples = lambda td: td["ego_mem"][:, 8:].view(-1, HISTORY_LEN, 3)  # noqa: E731
+    memory = samples(body_run[5]) - samples(exact[5])
+    frame_now = _frames(exact[5]["heading"])
+    for k in (0, 1):  # the sample k * HISTORY_STRIDE steps back: the bias as sensed then, seen from now
+        expected = to_body(frame_now, to_world(exact[5 - k * HISTORY_STRIDE], 0.2 * body_env.state.sensor_bias[:, 0:3]))
+        assert torch.allclose(memory[:, k], expected, atol=1e-5), k
+
+
+def test_the_bias_frame_key_reaches_the_env_and_a_bad_one_is_refused():
+    cfg = compose_config(["obs=ego_mem", "env.sensor_bias.flow=0.1", "env.sensor_bias.frame=body"])
+    flow = build_flow(cfg.flow)
+    built = build_env(cfg.env, flow, build_task(cfg.task, flow), ["ego_mem"], num_envs=4)
+    assert built.settings.sensor_bias_frame == "body" and built.settings.body_bias
+    default = compose_config(["obs=ego_mem", "env.sensor_bias.flow=0.1"])
+    built = build_env(default.env, flow, build_task(default.task, flow), ["ego_mem"], num_envs=4)
+    assert built.settings.sensor_bias_frame == "world" and not built.settings.body_bias
+    with pytest.raises(ValueError, match="sensor_bias_frame is 'world' or 'body'; got 'up'"):
+        NavigationEnv(swirl(), num_envs=2, sensor_bias_frame="up")

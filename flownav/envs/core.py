@@ -26,7 +26,16 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-from flownav.envs.kinematics import body_frame, heading_vector, move, step_reaches, to_body, turn, wrap_angle
+from flownav.envs.kinematics import (
+    body_frame,
+    from_body,
+    heading_vector,
+    move,
+    step_reaches,
+    to_body,
+    turn,
+    wrap_angle,
+)
 from flownav.envs.observations import (
     AROUND_OFFSETS,
     HISTORY_LEN,
@@ -77,7 +86,8 @@ class Settings:
     max_steps: the time limit in steps. misalignment_deg: the scene turned about z through ``rotation_center``.
     flow_strength: ``(low, high)`` of each episode's factor on the flow, or None; flow_strength_full: the share
     of episodes at 1. sensor_noise: ``(flow, target, gradient)`` standard deviations of the ego views' sensors'
-    errors drawn fresh each step, sensor_bias: of their errors drawn once per episode (:func:`draw_sensor_error`).
+    errors drawn fresh each step, sensor_bias: of their errors drawn once per episode (:func:`draw_sensor_error`),
+    sensor_bias_frame: where the flow's and to-target's bias is fixed, "world" or "body" (:func:`reading_error`).
     """
 
     task: object
@@ -94,6 +104,7 @@ class Settings:
     flow_strength_full: float = 0.0
     sensor_noise: tuple[float, float, float] = (0.0, 0.0, 0.0)
     sensor_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    sensor_bias_frame: str = "world"
 
     def _read_with_error(self, sd: tuple[float, float, float]) -> bool:
         """Whether a view reads a sensor to which ``(flow, target, gradient)`` standard deviations give an error: an
@@ -115,6 +126,11 @@ class Settings:
     def biased(self) -> bool:
         """Whether a sensor that a view reads errs by a per-episode bias as well (drawn at reset)."""
         return self._read_with_error(self.sensor_bias)
+
+    @property
+    def body_bias(self) -> bool:
+        """Whether the flow's and to-target's bias turns with the swimmer (fixed in its body frame)."""
+        return self.biased and self.sensor_bias_frame == "body"
 
     @property
     def sensor_error_width(self) -> int:
@@ -318,7 +334,8 @@ def reset(state: Swimmers, idx: Tensor, flow: FlowField, settings: Settings, rng
     if settings.biased:  # after the fresh errors: sensors without a bias keep their streams
         bias = put(bias, draw_sensor_error(idx.numel(), rng, settings.sensor_error_width))
     if state.flow_ring.shape[1]:  # no past yet: the swimmer has been sensing its start flow
-        state.flow_ring[idx] = sensed_flow(flow_vel, error[idx], bias[idx], settings)[:, None, :]
+        frame = body_frame(ep.theta, ep.psi) if settings.body_bias else None
+        state.flow_ring[idx] = sensed_flow(flow_vel, error[idx], bias[idx], settings, frame)[:, None, :]
     state = replace(
         state,
         pos=put(state.pos, ep.start),
@@ -362,17 +379,33 @@ FLOW_SENSOR, TARGET_SENSOR, GRADIENT_SENSOR = 0, 1, 2
 SENSOR_COLUMNS = (slice(0, 3), slice(3, 6), slice(6, 15))  # of draw_sensor_error's draws
 
 
-def reading_error(sensor: int, error: Tensor, bias: Tensor, settings: Settings, scale: Tensor | float = 1.0) -> Tensor:
-    """A sensor's error from its standard-normal draws: (sigma_noise scale) e + (sigma_bias scale) b, ``scale`` the
-    reading's length for the relative to-target error (no bias term without a bias: exact as before it existed)."""
+def reading_error(
+    sensor: int,
+    error: Tensor,
+    bias: Tensor,
+    settings: Settings,
+    scale: Tensor | float = 1.0,
+    frame: Tensor | None = None,
+) -> Tensor:
+    """A sensor's error in the frame of its reading from its standard-normal draws: (sigma_noise scale) e +
+    (sigma_bias scale) b, ``scale`` the reading's length for the relative to-target error (no bias term without a
+    bias: exact as before it existed). With ``settings.body_bias`` the flow's and to-target's b are body-frame
+    components, turned into the world frame by ``frame`` (:func:`~flownav.envs.kinematics.body_frame` of the
+    swimmer's heading when it reads); the gradient's b is per body-axis component either way."""
     cols = SENSOR_COLUMNS[sensor]
     out = settings.sensor_noise[sensor] * scale * error[:, cols]
-    return out + settings.sensor_bias[sensor] * scale * bias[:, cols] if settings.biased else out
+    if not settings.biased:
+        return out
+    b = bias[:, cols]
+    if settings.body_bias and sensor != GRADIENT_SENSOR:
+        b = from_body(frame, b)
+    return out + settings.sensor_bias[sensor] * scale * b
 
 
-def sensed_flow(flow_vel: Tensor, error: Tensor, bias: Tensor, settings: Settings) -> Tensor:
-    """The flow as the ego views' sensor reads it (exact without sensor errors)."""
-    return flow_vel + reading_error(FLOW_SENSOR, error, bias, settings) if settings.noisy else flow_vel
+def sensed_flow(flow_vel: Tensor, error: Tensor, bias: Tensor, settings: Settings, frame: Tensor | None) -> Tensor:
+    """The flow as the ego views' sensor reads it (exact without sensor errors); ``frame``: the swimmer's body
+    frame, needed when the bias turns with it (:func:`reading_error`)."""
+    return flow_vel + reading_error(FLOW_SENSOR, error, bias, settings, frame=frame) if settings.noisy else flow_vel
 
 
 def keep_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tensor) -> Swimmers:
@@ -409,7 +442,8 @@ def step(
     ring_ptr = state.ring_ptr
     if state.flow_ring.shape[1]:
         ring_ptr = (ring_ptr + 1) % state.flow_ring.shape[1]
-        state.flow_ring[:, ring_ptr] = sensed_flow(flow_vel, error, state.sensor_bias, settings)
+        frame = body_frame(theta, psi) if settings.body_bias else None
+        state.flow_ring[:, ring_ptr] = sensed_flow(flow_vel, error, state.sensor_bias, settings, frame)
 
     radius = settings.reward.success_radius
     dist = flow.displacement(pos, state.target).norm(dim=-1)
@@ -535,9 +569,9 @@ def sensed_state(seen: State, state: Swimmers, settings: Settings) -> State:
     the total velocity as the swim velocity plus that reading, the to-target vector with its relative error, the
     body-axis gradient with its error (the memory already holds the readings as sensed)."""
     error, bias = state.sensor_error, state.sensor_bias
-    flow_error = reading_error(FLOW_SENSOR, error, bias, settings)
+    flow_error = reading_error(FLOW_SENSOR, error, bias, settings, frame=seen.frame)
     d = seen.to_target
-    d_error = reading_error(TARGET_SENSOR, error, bias, settings, d.norm(dim=-1, keepdim=True))
+    d_error = reading_error(TARGET_SENSOR, error, bias, settings, d.norm(dim=-1, keepdim=True), seen.frame)
     sensed = replace(seen, flow=seen.flow + flow_error, velocity=seen.velocity + flow_error, to_target=d + d_error)
     if settings.gradient_noisy and seen.body_flow_gradient is not None:
         gradient_error = reading_error(GRADIENT_SENSOR, error, bias, settings).view(-1, 3, 3)

@@ -51,6 +51,11 @@ def to_body(frame: Tensor, vec: Tensor) -> Tensor:
     return (frame * vec[:, :, None]).sum(1)  # elementwise: faster than einsum/bmm for 3x3
 
 
+def from_body(frame: Tensor, vec: Tensor) -> Tensor:
+    """Inertial vectors ``[N, 3]`` from their body-frame components (R v; the inverse of :func:`to_body`)."""
+    return (frame * vec[:, None, :]).sum(-1)
+
+
 def turn(theta: Tensor, psi: Tensor, dtheta: Tensor, dpsi: Tensor, dt: float) -> tuple[Tensor, Tensor]:
     return wrap_angle(theta + dtheta * dt), (psi + dpsi * dt).clamp(-math.pi / 2, math.pi / 2)
 

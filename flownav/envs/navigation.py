@@ -54,8 +54,10 @@ class NavigationEnv(EnvBase):
             the body-axis gradient's per component (``ego_mem_grad``; velocity per unit length)
             (:func:`flownav.envs.core.draw_sensor_error`). The geo and privileged views stay exact.
         sensor_bias: ``(flow, target, gradient)``: standard deviations of the same sensors' errors drawn once per
-            episode (a steady bias: the flow reading's and the to-target vector's fixed in the world frame, the
-            gradient's per body-axis component), added to those of ``sensor_noise``.
+            episode (a steady bias, added to the errors of ``sensor_noise``): the gradient's per body-axis component,
+            the flow reading's and the to-target vector's fixed in ``sensor_bias_frame``: ``"world"`` (a phantom
+            steady current, a drifting bearing reference) or ``"body"`` (turning with the swimmer: a sensor's
+            mounting offset).
     """
 
     batch_locked = True
@@ -78,6 +80,7 @@ class NavigationEnv(EnvBase):
         flow_strength_full: float = 0.0,
         sensor_noise: tuple[float, float, float] = (0.0, 0.0, 0.0),
         sensor_bias: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        sensor_bias_frame: str = "world",
         seed: int | None = 0,
         device="cpu",
     ):
@@ -99,6 +102,8 @@ class NavigationEnv(EnvBase):
         for name, sd in (("sensor_noise", sensor_noise), ("sensor_bias", sensor_bias)):
             if len(sd) != 3 or not all(v >= 0 for v in sd):
                 raise ValueError(f"{name} is (flow, target, gradient), three standard deviations >= 0; got {sd}")
+        if sensor_bias_frame not in ("world", "body"):
+            raise ValueError(f"sensor_bias_frame is 'world' or 'body'; got {sensor_bias_frame!r}")
         super().__init__(device=device, batch_size=torch.Size([num_envs]))
         self.num_envs, self.views, self.time_limit = num_envs, check_views(views), float(time_limit)
         self.settings = Settings(
@@ -117,6 +122,7 @@ class NavigationEnv(EnvBase):
             flow_strength_full=float(flow_strength_full),
             sensor_noise=sensor_noise,
             sensor_bias=sensor_bias,
+            sensor_bias_frame=sensor_bias_frame,
         )
         self.flow = core.scene_flow(flow, self.settings, num_envs, self.device)
         self._make_specs()
