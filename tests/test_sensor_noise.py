@@ -350,8 +350,9 @@ def test_a_body_frame_bias_turns_with_the_swimmer():
     samples = lambda td: td["ego_mem"][:, 8:].view(-1, HISTORY_LEN, 3)  # noqa: E731
     memory = samples(body_run[5]) - samples(exact[5])
     frame_now = _frames(exact[5]["heading"])
-    for k in (0, 1):  # the sample k * HISTORY_STRIDE steps back: the bias as sensed then, seen from now
-        expected = to_body(frame_now, to_world(exact[5 - k * HISTORY_STRIDE], 0.2 * body_env.state.sensor_bias[:, 0:3]))
+    for k in range(HISTORY_LEN):  # k * HISTORY_STRIDE steps back (before the start: the reading at the reset)
+        then = exact[max(5 - k * HISTORY_STRIDE, 0)]
+        expected = to_body(frame_now, to_world(then, 0.2 * body_env.state.sensor_bias[:, 0:3]))
         assert torch.allclose(memory[:, k], expected, atol=1e-5), k
 
 
