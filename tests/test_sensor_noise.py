@@ -87,6 +87,11 @@ def _frames(heading):
     return body_frame(heading[:, 0], heading[:, 1])
 
 
+def _to_world(td, v):
+    """Body-frame components ``v`` of a step's readings as world vectors, by that step's heading (R v)."""
+    return torch.einsum("bij,bj->bi", _frames(td["heading"]), v)
+
+
 def test_a_noisy_env_resumes_exactly():
     """The last reading's error is part of the saved state: a fresh env that loads it sees and steps identically."""
     env = make((0.2, 0.1, 0.0), n=32)
@@ -259,19 +264,17 @@ def test_a_bias_is_drawn_once_per_episode_with_its_spread():
     exact = run(make((0.0, 0.0, 0.0), views=views), 6)
     biased_env = make((0.0, 0.0, 0.0), bias=(0.2, 0.05, 0.03), views=views)
     biased = run(biased_env, 6)
-    for a, b in zip(exact, biased, strict=True):
+    steps = list(zip(exact, biased, strict=True))
+    for a, b in steps:
         assert torch.equal(a["position"], b["position"]) and torch.equal(a["geo_priv"], b["geo_priv"])
-    world = lambda td, v: torch.einsum("bij,bj->bi", _frames(td["heading"]), v)  # noqa: E731  body -> world
-    flow = [world(b, b["ego_flow"][:, 3:]) - world(a, a["ego_flow"][:, 3:]) for a, b in zip(exact, biased, strict=True)]
-    memory = [
-        world(b, b["ego_mem"][:, 8:11]) - world(a, a["ego_mem"][:, 8:11]) for a, b in zip(exact, biased, strict=True)
-    ]
+    flow = [_to_world(b, b["ego_flow"][:, 3:]) - _to_world(a, a["ego_flow"][:, 3:]) for a, b in steps]
+    memory = [_to_world(b, b["ego_mem"][:, 8:11]) - _to_world(a, a["ego_mem"][:, 8:11]) for a, b in steps]
     target = [
-        (world(b, b["ego_flow"][:, :3]) - world(a, a["ego_flow"][:, :3]))
+        (_to_world(b, b["ego_flow"][:, :3]) - _to_world(a, a["ego_flow"][:, :3]))
         / a["ego_flow"][:, :3].norm(dim=-1, keepdim=True)
-        for a, b in zip(exact, biased, strict=True)
+        for a, b in steps
     ]
-    gradient = [b["ego_mem_grad"][:, -9:] - a["ego_mem_grad"][:, -9:] for a, b in zip(exact, biased, strict=True)]
+    gradient = [b["ego_mem_grad"][:, -9:] - a["ego_mem_grad"][:, -9:] for a, b in steps]
     for errors, sigma in ((flow, 0.2), (memory, 0.2), (target, 0.05), (gradient, 0.03)):
         assert torch.allclose(errors[1], errors[5], atol=1e-4)  # the same error all episode long
         assert errors[5].std().item() == pytest.approx(sigma, rel=0.05)
@@ -332,27 +335,26 @@ def test_a_body_frame_bias_turns_with_the_swimmer():
     body_env = make((0.0, 0.0, 0.0), bias=bias, views=views, sensor_bias_frame="body")
     world_run, body_run = run(world_env, 6), run(body_env, 6)
     assert torch.equal(world_env.state.sensor_bias, body_env.state.sensor_bias)  # the same draws
-    to_world = lambda td, v: torch.einsum("bij,bj->bi", _frames(td["heading"]), v)  # noqa: E731  body -> world
     for a, w, b in zip(exact, world_run, body_run, strict=True):
         assert torch.equal(a["position"], b["position"]) and torch.equal(a["geo_priv"], b["geo_priv"])
         flow_body = b["ego_flow"][:, 3:] - a["ego_flow"][:, 3:]
         target_body = (b["ego_flow"][:, :3] - a["ego_flow"][:, :3]) / a["ego_flow"][:, :3].norm(dim=-1, keepdim=True)
         assert torch.allclose(flow_body, 0.2 * body_env.state.sensor_bias[:, 0:3], atol=1e-5)
         assert torch.allclose(target_body, 0.05 * body_env.state.sensor_bias[:, 3:6], atol=1e-5)
-        flow_world = to_world(w, w["ego_flow"][:, 3:]) - to_world(a, a["ego_flow"][:, 3:])
+        flow_world = _to_world(w, w["ego_flow"][:, 3:]) - _to_world(a, a["ego_flow"][:, 3:])
         assert torch.allclose(flow_world, 0.2 * world_env.state.sensor_bias[:, 0:3], atol=1e-5)
         assert torch.allclose(w["ego_mem_grad"][:, -9:], b["ego_mem_grad"][:, -9:])  # the gradient's: body axes
     turned = (exact[5]["heading"] - exact[1]["heading"]).abs().sum(-1) > 0.1  # swimmers whose heading changed
     assert turned.float().mean() > 0.5
-    world_then = to_world(exact[1], 0.2 * body_env.state.sensor_bias[:, 0:3])
-    world_now = to_world(exact[5], 0.2 * body_env.state.sensor_bias[:, 0:3])
+    world_then = _to_world(exact[1], 0.2 * body_env.state.sensor_bias[:, 0:3])
+    world_now = _to_world(exact[5], 0.2 * body_env.state.sensor_bias[:, 0:3])
     assert not torch.allclose(world_then[turned], world_now[turned], atol=1e-3)  # in the world frame it turned
     samples = lambda td: td["ego_mem"][:, 8:].view(-1, HISTORY_LEN, 3)  # noqa: E731
     memory = samples(body_run[5]) - samples(exact[5])
     frame_now = _frames(exact[5]["heading"])
     for k in range(HISTORY_LEN):  # k * HISTORY_STRIDE steps back (before the start: the reading at the reset)
         then = exact[max(5 - k * HISTORY_STRIDE, 0)]
-        expected = to_body(frame_now, to_world(then, 0.2 * body_env.state.sensor_bias[:, 0:3]))
+        expected = to_body(frame_now, _to_world(then, 0.2 * body_env.state.sensor_bias[:, 0:3]))
         assert torch.allclose(memory[:, k], expected, atol=1e-5), k
 
 

@@ -334,8 +334,7 @@ def reset(state: Swimmers, idx: Tensor, flow: FlowField, settings: Settings, rng
     if settings.biased:  # after the fresh errors: sensors without a bias keep their streams
         bias = put(bias, draw_sensor_error(idx.numel(), rng, settings.sensor_error_width))
     if state.flow_ring.shape[1]:  # no past yet: the swimmer has been sensing its start flow
-        frame = body_frame(ep.theta, ep.psi) if settings.body_bias else None
-        state.flow_ring[idx] = sensed_flow(flow_vel, error[idx], bias[idx], settings, frame)[:, None, :]
+        state.flow_ring[idx] = sensed_flow(flow_vel, error[idx], bias[idx], settings, ep.theta, ep.psi)[:, None, :]
     state = replace(
         state,
         pos=put(state.pos, ep.start),
@@ -402,10 +401,15 @@ def reading_error(
     return out + settings.sensor_bias[sensor] * scale * b
 
 
-def sensed_flow(flow_vel: Tensor, error: Tensor, bias: Tensor, settings: Settings, frame: Tensor | None) -> Tensor:
-    """The flow as the ego views' sensor reads it (exact without sensor errors); ``frame``: the swimmer's body
-    frame, needed when the bias turns with it (:func:`reading_error`)."""
-    return flow_vel + reading_error(FLOW_SENSOR, error, bias, settings, frame=frame) if settings.noisy else flow_vel
+def sensed_flow(
+    flow_vel: Tensor, error: Tensor, bias: Tensor, settings: Settings, theta: Tensor, psi: Tensor
+) -> Tensor:
+    """The flow as the ego views' sensor reads it at the heading ``(theta, psi)`` (exact without sensor errors; the
+    heading matters only to a bias that turns with the swimmer, :func:`reading_error`)."""
+    if not settings.noisy:
+        return flow_vel
+    frame = body_frame(theta, psi) if settings.body_bias else None
+    return flow_vel + reading_error(FLOW_SENSOR, error, bias, settings, frame=frame)
 
 
 def keep_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tensor) -> Swimmers:
@@ -442,8 +446,7 @@ def step(
     ring_ptr = state.ring_ptr
     if state.flow_ring.shape[1]:
         ring_ptr = (ring_ptr + 1) % state.flow_ring.shape[1]
-        frame = body_frame(theta, psi) if settings.body_bias else None
-        state.flow_ring[:, ring_ptr] = sensed_flow(flow_vel, error, state.sensor_bias, settings, frame)
+        state.flow_ring[:, ring_ptr] = sensed_flow(flow_vel, error, state.sensor_bias, settings, theta, psi)
 
     radius = settings.reward.success_radius
     dist = flow.displacement(pos, state.target).norm(dim=-1)
