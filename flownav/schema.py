@@ -350,6 +350,7 @@ DAGGER = {
     "scene_away_expert": Str(null=True),
     "scene_wake_expert": Str(null=True),
     "scene_posed_expert": Str(null=True),
+    "scene_wake_regions_expert": Str(null=True),
     "scene_currents": Str(choices=("all", "vertical"), null=True),
     "scene_free_flows": Str(choices=("compensating", "capped"), null=True),
     "final_eval_episodes": Int(ge=0),

@@ -47,11 +47,14 @@ def test_paper_scene_in_a_family_marks_only_the_posed_wake_member_with_the_paper
     member = env.flow.params["member"]
     papers = (member == 0) & (env.state.swim_scale == 1) & REGION_2.contains(env.state.target)
     assert 100 < papers.sum() < 2048 and torch.equal((flags >= 1) & (flags <= 4), papers)
-    # any other task of a full-speed swimmer in the posed wake is 7, in the turned wake 5; a current's are 6
+    # any other task of a full-speed swimmer in the posed wake is 7, in the turned wake 5 but the paper's regions
+    # there 9; a current's are 6
     full = env.state.swim_scale == 1
     posed_other, turned = (member == 0) & ~papers & full, (member == 1) & full
-    assert 100 < posed_other.sum() and 100 < turned.sum()
-    assert torch.equal(flags == 7, posed_other) and torch.equal(flags == 5, turned)
+    regions = REGION_1.contains(env.state.start) & REGION_2.contains(env.state.target)
+    assert 100 < posed_other.sum() and 100 < (turned & ~regions).sum() and 100 < (turned & regions).sum()
+    assert torch.equal(flags == 7, posed_other)
+    assert torch.equal(flags == 5, turned & ~regions) and torch.equal(flags == 9, turned & regions)
     assert torch.equal(flags == 6, member == 2)
     assert torch.equal(flags == 0, (member < 2) & ~full)  # a weaker swimmer in a wake: none
     # geo_priv_scene is geo_priv plus the flag
@@ -164,7 +167,7 @@ def test_the_crossing_from_region_2_to_region_1_in_the_posed_wake_is_coded_3():
 def test_a_wake_on_a_current_is_a_wake_scene_and_currents_alone_are_the_current_scene():
     turned = TransformedFamily([synthetic_wake()], angle_deg=(10, 80), strength=(1, 1), background=(0, 0))
     on_current = SumFamily([turned, UniformFamily()])
-    env, flags = scene_flags(on_current, FamilyTask(WAKE_BOUNDS), n=64)
+    env, flags = scene_flags(on_current, FamilyTask(WAKE_BOUNDS, regions_share=0.0), n=64)  # no paper's regions: 9
     full = env.state.swim_scale == 1
     assert 0 < full.sum() < 64 and torch.equal(flags, torch.where(full, 5.0, 0.0))
     assert scene_flags(SumFamily([UniformFamily(), UniformFamily()]), FamilyTask(WAKE_BOUNDS), n=64)[1].eq(6).all()
@@ -178,7 +181,7 @@ def test_a_full_speed_swimmer_in_a_random_flow_or_one_on_a_current_is_the_free_s
     street = vortex_street_family(variants=1)  # a street carries its cylinder: the obstacle scene, as a wake
     members = [FourierFamily(), on_current, turned, street, UniformFamily()]
     flow = MixtureFamily(members, [1.0] * 5, WAKE_BOUNDS)
-    env, flags = scene_flags(flow, FamilyTask(WAKE_BOUNDS, full_speed_share=0.5), n=1024)
+    env, flags = scene_flags(flow, FamilyTask(WAKE_BOUNDS, regions_share=0.0, full_speed_share=0.5), n=1024)
     member, full = env.flow.params["member"], env.state.swim_scale == 1
     free = (member < 2) & full
     assert 100 < free.sum() < 1024 and torch.equal(flags == 8, free)
@@ -213,6 +216,30 @@ def test_every_other_wake_episode_goes_to_the_wake_expert_or_else_the_generalist
     wake = SceneRoutedTeacher(generalist, expert, wake=Constant([0.6, -0.2, 0.4], 23))(obs)  # reads geo_priv
     assert torch.equal(wake[[0, 3]], torch.tensor([[0.6, -0.2, 0.4]]).expand(2, 3))
     assert torch.equal(wake[[1, 2, 4, 5]], plain[[1, 2, 4, 5]])
+
+
+def test_the_papers_regions_in_other_wakes_go_to_their_expert_or_else_where_the_other_wake_episodes_go():
+    generalist, expert = Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9)
+    wake, regions = Constant([0.6, -0.2, 0.4], 23), Constant([-0.3, 0.6, -0.7], 23)
+    obs = torch.randn(5, 24)
+    obs[:, -1] = torch.tensor([9.0, 5.0, 1.0, 9.0, 0.0])
+    plain = SceneRoutedTeacher(generalist, expert)(obs)
+    assert torch.equal(plain[[0, 1, 3, 4]], torch.tensor([[0.1, 0.2, 0.3]]).expand(4, 3))
+    with_wake = SceneRoutedTeacher(generalist, expert, wake=wake)(obs)
+    assert torch.equal(with_wake[[0, 1, 3]], torch.tensor([[0.6, -0.2, 0.4]]).expand(3, 3))
+    both = SceneRoutedTeacher(generalist, expert, wake=wake, wake_regions=regions)(obs)
+    assert torch.equal(both[[0, 3]], torch.tensor([[-0.3, 0.6, -0.7]]).expand(2, 3))
+    assert torch.equal(both[[1, 2, 4]], with_wake[[1, 2, 4]])
+    net = DeterministicPolicy(23, LOW, HIGH, hidden=[8])
+    routed = scene_routed(
+        DeterministicPolicy(23, LOW, HIGH, hidden=[8]),
+        "geo_priv",
+        {
+            "scene_expert": ("t.pt", DeterministicPolicy(9, LOW, HIGH, hidden=[8])),
+            "scene_wake_regions_expert": ("r.pt", net),
+        },
+    )
+    assert routed.wake_regions is net and routed.wake is None
 
 
 def test_currents_go_to_the_flow_compensating_expert_when_asked():

@@ -16,8 +16,10 @@ there: +experiment=generalist_away_expert), else to the paper's teacher. Every o
 families with an obstacle (flag 5: a CFD wake or a vortex street, turned, scaled or on a current) goes to
 ``algo.scene_wake_expert`` when one is given (a ``geo_priv`` checkpoint, e.g. a network that imitates the oracle
 over the wake family:
-+experiment=generalist_wake_expert), else to the generalist; so does any other task in the wake as posed (flag 7)
-unless ``algo.scene_posed_expert`` is given (a ``geo_priv`` network that imitates the oracle there:
++experiment=generalist_wake_expert), else to the generalist; so do the paper's regions in those flows (flag 9)
+unless ``algo.scene_wake_regions_expert`` is given (a ``geo_priv`` network that imitates the oracle on the paper's
+regions in the turned wakes: +experiment=generalist_wake_regions_expert), and any other task in the wake as posed
+(flag 7) unless ``algo.scene_posed_expert`` is given (a ``geo_priv`` network that imitates the oracle there:
 +experiment=generalist_posed_expert). Only full-speed swimmers are flagged there (a weaker swimmer's wake episode
 keeps flag 0). Episodes in a uniform current or still water of the families (flag 6) go to the flow-compensating
 expert with ``algo.scene_currents=all`` (there it swims the straight, fastest track), only the mostly vertical ones
@@ -42,6 +44,7 @@ from flownav.envs.core import (
     SCENE_REVERSE,
     SCENE_UPSTREAM,
     SCENE_WAKE,
+    SCENE_WAKE_REGIONS,
 )
 from flownav.envs.observations import GEO_PRIV_FLOW, observation_size
 from flownav.errors import CheckpointError
@@ -55,6 +58,7 @@ EXPERT_VIEWS = {
     "scene_away_expert": GENERALIST_VIEW,
     "scene_wake_expert": GENERALIST_VIEW,
     "scene_posed_expert": GENERALIST_VIEW,
+    "scene_wake_regions_expert": GENERALIST_VIEW,
 }
 CURRENT_ROUTES = (None, "all", "vertical")  # algo.scene_currents: which currents the flow-compensating expert labels
 # The capped expert's least share of its speed towards the target: of 0.3 / 0.5 / 0.7, 0.3 and 0.5 are at or above
@@ -71,7 +75,8 @@ class SceneRoutedTeacher(nn.Module):
     """The expert of each row's paper-scene code (the view's last entry, flownav.envs.core.paper_scene):
     ``expert`` for SCENE_PAPER, the flow-compensating expert for SCENE_UPSTREAM, ``reverse`` (if given) for
     SCENE_REVERSE, ``away`` (if given; else ``expert``) for SCENE_AWAY, ``wake`` (if given) for SCENE_WAKE, ``posed``
-    (if given; else as SCENE_WAKE) for SCENE_POSED, the
+    (if given; else as SCENE_WAKE) for SCENE_POSED, ``wake_regions`` (if given; else as SCENE_WAKE) for
+    SCENE_WAKE_REGIONS, the
     flow-compensating expert for SCENE_CURRENT if ``currents`` is ``"all"`` (only where the current is mostly
     vertical if ``"vertical"``), the flow-compensating expert for SCENE_FREE if ``free_flows`` is ``"compensating"``
     (capped at :data:`CAPPED_MIN_PROGRESS` if ``"capped"``),
@@ -90,10 +95,11 @@ class SceneRoutedTeacher(nn.Module):
         currents: str | None = None,
         posed: nn.Module | None = None,
         free_flows: str | None = None,
+        wake_regions: nn.Module | None = None,
     ):
         super().__init__()
         self.generalist, self.expert, self.reverse, self.away, self.wake = generalist, expert, reverse, away, wake
-        self.posed = posed
+        self.posed, self.wake_regions = posed, wake_regions
         if currents not in CURRENT_ROUTES:
             raise ValueError(f"currents is {currents!r}; choose one of {CURRENT_ROUTES}")
         if free_flows not in FREE_ROUTES:
@@ -121,7 +127,11 @@ class SceneRoutedTeacher(nn.Module):
             wake = code == SCENE_WAKE
             if self.posed is None:  # the posed wake's other tasks go where the other wakes' go
                 wake = wake | (code == SCENE_POSED)
+            if self.wake_regions is None:  # and so do the paper's regions in the other wakes
+                wake = wake | (code == SCENE_WAKE_REGIONS)
             out = torch.where(wake, self.wake(view), out)
+        if self.wake_regions is not None:
+            out = torch.where(code == SCENE_WAKE_REGIONS, self.wake_regions(view), out)
         if self.posed is not None:
             out = torch.where(code == SCENE_POSED, self.posed(view), out)
         paper = self.expert(geo)
@@ -138,7 +148,8 @@ def scene_routed(
 ) -> SceneRoutedTeacher:
     """The routed teacher of a ``geo_priv`` generalist and its experts: ``experts`` maps the config key
     (``algo.scene_expert``, optionally ``algo.scene_reverse_expert``, ``algo.scene_away_expert``,
-    ``algo.scene_wake_expert`` and ``algo.scene_posed_expert``) to (checkpoint name, loaded policy);
+    ``algo.scene_wake_expert``, ``algo.scene_posed_expert`` and ``algo.scene_wake_regions_expert``) to (checkpoint
+    name, loaded policy);
     ``currents``: ``algo.scene_currents``; ``free_flows``: ``algo.scene_free_flows``."""
     if generalist_view != GENERALIST_VIEW:
         raise CheckpointError(
@@ -160,4 +171,5 @@ def scene_routed(
         currents=currents,
         posed=loaded.get("scene_posed_expert"),
         free_flows=free_flows,
+        wake_regions=loaded.get("scene_wake_regions_expert"),
     )

@@ -587,7 +587,7 @@ def sensed_state(seen: State, state: Swimmers, settings: Settings) -> State:
 UPSTREAM_X = 4.0
 # The codes of paper_scene: which expert of a scene-routed teacher labels a swimmer (flownav/agents/scene_router.py).
 SCENE_NONE, SCENE_PAPER, SCENE_UPSTREAM, SCENE_REVERSE, SCENE_AWAY, SCENE_WAKE, SCENE_CURRENT = 0, 1, 2, 3, 4, 5, 6
-SCENE_POSED, SCENE_FREE = 7, 8
+SCENE_POSED, SCENE_FREE, SCENE_WAKE_REGIONS = 7, 8, 9
 
 
 def paper_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tensor | None = None) -> Tensor:
@@ -598,7 +598,8 @@ def paper_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tenso
     target from any other start (the rest of the extended domain); SCENE_REVERSE: from Region 2 to a target in
     Region 1 (the crossing the other way, paper SI 2); SCENE_POSED: any other task of a full-speed swimmer in a
     family slot whose flow is the wake as posed; SCENE_WAKE: any other episode of a full-speed swimmer in a family
-    slot whose flow holds an obstacle (a CFD wake or a vortex street; turned, scaled or on a current);
+    slot whose flow holds an obstacle (a CFD wake or a vortex street; turned, scaled or on a current), and
+    SCENE_WAKE_REGIONS where that episode is the paper's task (a start in Region 1, the target in Region 2);
     SCENE_CURRENT: an episode in a family slot whose flow is a uniform current or still water; SCENE_FREE: an
     episode of a full-speed swimmer in any other family slot (a random flow, one on a current); else SCENE_NONE.
     What the simulator knows and a scene-routed teacher reads."""
@@ -619,7 +620,10 @@ def paper_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tenso
     code = torch.where(REGION_1.contains(start), SCENE_PAPER, SCENE_AWAY)
     code = torch.where(start[:, 0] < UPSTREAM_X, SCENE_UPSTREAM, code)
     other = torch.where(free, SCENE_FREE, SCENE_NONE)
-    other = torch.where(wake, SCENE_WAKE, torch.where(current, SCENE_CURRENT, other))
+    regions = REGION_1.contains(start) & REGION_2.contains(target)
+    other = torch.where(
+        wake, torch.where(regions, SCENE_WAKE_REGIONS, SCENE_WAKE), torch.where(current, SCENE_CURRENT, other)
+    )
     other = torch.where(posed & wake, SCENE_POSED, other)
     code = torch.where(forward, code, other)
     return torch.where(reverse, SCENE_REVERSE, code)

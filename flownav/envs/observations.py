@@ -41,7 +41,8 @@
   paper's training task as posed (the unturned CFD wake at strength 1, full swim speed, the target in Region
   2), 2 there when its episode started upstream of the paper's regions, 4 from any other start, 3 from Region 2
   to a target in Region 1, 7 with any other task there (a family slot), 5 in any other full-speed episode in a
-  flow of the families with an obstacle (a CFD wake or a vortex street), 6 in their uniform currents and still
+  flow of the families with an obstacle (a CFD wake or a vortex street; 9 where that episode is the paper's task,
+  Region 1 to Region 2), 6 in their uniform currents and still
   water, 8 in any other full-speed episode of the families (random flows, and those on a current), else 0
   (``flownav.envs.core.paper_scene``): what a teacher needs to hand those episodes to their experts
   (``SceneRoutedTeacher``).
@@ -84,7 +85,7 @@ class State:
     swim_speed: Tensor | None = None  # [N] the swimmer's full swim speed
     time_left: Tensor | None = None  # [N] fraction of the time limit left; privileged views only
     target_flow: Tensor | None = None  # [N, 3] flow velocity at the target; geo_priv_critic only
-    paper_scene: Tensor | None = None  # [N] the paper's scene code (core.paper_scene: 0-8); geo_priv_scene only
+    paper_scene: Tensor | None = None  # [N] the paper's scene code (core.paper_scene: 0-9); geo_priv_scene only
 
 
 # The memory of ``ego_mem``: HISTORY_LEN flow samples, HISTORY_STRIDE steps apart (newest first). With
