@@ -615,12 +615,13 @@ def paper_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tenso
         posed = posed & (state.strength[slots] == 1)
     full = state.swim_scale[slots] == 1
     posed, wake, free = posed & full, wake & full, free & full
-    forward = posed & REGION_2.contains(target)
+    from_1, to_2 = REGION_1.contains(start), REGION_2.contains(target)
+    forward = posed & to_2
     reverse = posed & REGION_1.contains(target) & REGION_2.contains(start)
-    code = torch.where(REGION_1.contains(start), SCENE_PAPER, SCENE_AWAY)
+    code = torch.where(from_1, SCENE_PAPER, SCENE_AWAY)
     code = torch.where(start[:, 0] < UPSTREAM_X, SCENE_UPSTREAM, code)
     other = torch.where(free, SCENE_FREE, SCENE_NONE)
-    regions = REGION_1.contains(start) & REGION_2.contains(target)
+    regions = from_1 & to_2
     other = torch.where(
         wake, torch.where(regions, SCENE_WAKE_REGIONS, SCENE_WAKE), torch.where(current, SCENE_CURRENT, other)
     )
