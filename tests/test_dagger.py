@@ -118,14 +118,21 @@ def test_beta_schedule_and_loss():
     assert float(imitation_loss(pred, target)) == pytest.approx(3.0)  # eq. 9 sums over the 3 action components
 
 
-def test_dagger_learns_the_teacher(teacher_ckpt, tmp_path):
+@pytest.fixture(scope="module")
+def tiny_run(teacher_ckpt, tmp_path_factory):
+    """Five DAgger iterations on the tiny problem: (run directory, final metrics)."""
     import train
 
-    final = train.run(make_cfg(teacher_ckpt, "algo.iterations=5"), tmp_path / "run")
-    out = tmp_path / "run" / "checkpoints" / "last.pt"
-    assert json.loads((tmp_path / "run" / "results.json").read_text())["curve"][-1]["iteration"] == 5
-    losses = [float(r["train/loss"]) for r in rows(tmp_path / "run")]
-    onpolicy = [float(r["train/loss_onpolicy"]) for r in rows(tmp_path / "run")]
+    run_dir = tmp_path_factory.mktemp("dagger") / "run"
+    return run_dir, train.run(make_cfg(teacher_ckpt, "algo.iterations=5"), run_dir)
+
+
+def test_dagger_learns_the_teacher(tiny_run):
+    run_dir, final = tiny_run
+    out = run_dir / "checkpoints" / "last.pt"
+    assert json.loads((run_dir / "results.json").read_text())["curve"][-1]["iteration"] == 5
+    losses = [float(r["train/loss"]) for r in rows(run_dir)]
+    onpolicy = [float(r["train/loss_onpolicy"]) for r in rows(run_dir)]
     assert losses[-1] < 0.6 * losses[0] and onpolicy[-1] < 0.7 * max(onpolicy[:2])
     assert final["eval/teacher_success_rate"] > 0.9
     assert final["eval/student_success_rate"] >= final["eval/teacher_success_rate"] - 0.1
@@ -137,6 +144,22 @@ def test_dagger_learns_the_teacher(teacher_ckpt, tmp_path):
     assert obs.untyped_storage().nbytes() == obs.numel() * obs.element_size()  # not the buffer's whole capacity
     assert torch.allclose(policy.normalizer.mean, obs.mean(0), atol=1e-4)
     assert torch.allclose(policy.normalizer.var, obs.var(0, unbiased=False), rtol=1e-3)
+
+
+def test_the_capacity_probe_refits_a_runs_labels(tiny_run, capsys):
+    """scripts/student_capacity.py refits the run's saved pairs from scratch: on the tiny problem a network of the
+    run's size, fitted a little longer than the run fitted it (1,200 Adam steps against 5 x 150), imitates the
+    teacher on held-out pairs about as well as the run's own student on its pairs."""
+    from load import load_module
+
+    probe = load_module("scripts/student_capacity.py")
+    run_dir, _ = tiny_run
+    probe.main([str(run_dir / "checkpoints" / "last.pt"), "--hidden", "64,64", "--steps", "1200", "--reports", "3"])
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == "19,200 pairs: 17,280 fitted, 1,920 held out; 1200 steps per network"
+    held_out = [float(line.split("held out ")[1].split()[0]) for line in lines[1:]]
+    assert len(held_out) == 3 and held_out[0] > held_out[1] > held_out[2]
+    assert held_out[-1] < 1.1 * float(rows(run_dir)[-1]["train/loss"])
 
 
 def test_resume_continues_exactly(teacher_ckpt, tmp_path):
