@@ -154,7 +154,8 @@ def test_the_capacity_probe_refits_a_runs_labels(tiny_run, capsys):
 
     probe = load_module("scripts/student_capacity.py")
     run_dir, _ = tiny_run
-    probe.main([str(run_dir / "checkpoints" / "last.pt"), "--hidden", "64,64", "--steps", "1200", "--reports", "3"])
+    args = ["--hidden", "64,64", "--steps", "1200", "--reports", "3", "--threads", "1"]  # the tests' thread count
+    probe.main([str(run_dir / "checkpoints" / "last.pt"), *args])
     lines = capsys.readouterr().out.splitlines()
     assert lines[0] == "19,200 pairs: 17,280 fitted, 1,920 held out; 1200 steps per network"
     held_out = [float(line.split("held out ")[1].split()[0]) for line in lines[1:]]
