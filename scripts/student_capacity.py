@@ -17,7 +17,7 @@ import time
 import torch
 
 from flownav.agents.networks import DeterministicPolicy
-from flownav.algorithms.dagger import imitation_loss, set_normalizer_from
+from flownav.algorithms.dagger import fit_step, imitation_loss, set_normalizer_from
 from flownav.checkpoint import load_checkpoint
 
 SIZES = ("256,256", "512,512", "256,256,256", "384,384")
@@ -53,13 +53,7 @@ def fit(payload: dict, hidden: list[int], obs, labels, train, val, steps: int, r
     for step in range(1, steps + 1):
         idx = train[torch.randint(len(train), (int(algo["batch_size"]),))]
         policy.train()
-        loss = imitation_loss(policy(obs[idx]), labels[idx])
-        optim.zero_grad(set_to_none=True)
-        loss.backward()
-        if algo["grad_clip"]:
-            torch.nn.utils.clip_grad_norm_(policy.parameters(), float(algo["grad_clip"]))
-        optim.step()
-        running += float(loss.detach())
+        running += fit_step(policy, optim, obs[idx], labels[idx], algo["grad_clip"])
         if step % every == 0:
             yield step, running / every, held_out_loss(policy, obs[val], labels[val]), time.time() - t0
             running = 0.0

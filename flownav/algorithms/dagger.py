@@ -81,6 +81,17 @@ def imitation_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     return ((pred - target) ** 2).sum(-1).mean()
 
 
+def fit_step(policy, optim, obs: torch.Tensor, labels: torch.Tensor, grad_clip: float) -> float:
+    """One Adam step on eq. 9 (the global gradient norm clipped to ``grad_clip`` unless 0); the batch's loss."""
+    loss = imitation_loss(policy(obs), labels)
+    optim.zero_grad(set_to_none=True)
+    loss.backward()
+    if grad_clip:
+        torch.nn.utils.clip_grad_norm_(policy.parameters(), float(grad_clip))
+    optim.step()
+    return float(loss.detach())
+
+
 def check_config(cfg) -> None:
     """Checks beyond one key's type and range (those are in flownav.schema; train.py checks them)."""
     if not cfg.get("teacher_checkpoint"):
@@ -250,13 +261,7 @@ def train(cfg, run_dir) -> dict:
         total = 0.0
         for _ in range(updates):
             sample = buffer.sample()
-            loss = imitation_loss(student(sample["obs"]), sample["teacher_action"])
-            optim.zero_grad(set_to_none=True)
-            loss.backward()
-            if a.grad_clip:
-                torch.nn.utils.clip_grad_norm_(student.parameters(), float(a.grad_clip))
-            optim.step()
-            total += float(loss.detach())
+            total += fit_step(student, optim, sample["obs"], sample["teacher_action"], a.grad_clip)
         iteration += 1
         last = checkpoints.directory / "last.pt"
         require_finite_update("DAgger", iteration, {"train/loss": total}, student, last, NON_FINITE_FIX)
