@@ -179,6 +179,11 @@ CASES = [
     ("speed_scale_zero", train_case("flow.speed_scale=0"), "flow.speed_scale must be > 0, a finite number; got 0"),
     ("gamma_range", train_case("algo.gamma=1.5"), "algo.gamma must be in (0, 1], a finite number; got 1.5"),
     (
+        "clip_epsilon_zero",
+        train_case("algo.clip_epsilon=0"),
+        "algo.clip_epsilon must be in (0, 1), a finite number; got 0",
+    ),
+    (
         "strength_order",
         train_case("env.flow_strength=[0.5,0.2]"),
         "env: flow_strength must be [low, high] with 0 <= low <= high, got (0.5, 0.2)",
@@ -195,6 +200,16 @@ CASES = [
         "algo.oracle_settings.sensing_radius must be > 0, a finite number or null; got 0",
     ),
     # choices and a key tied to another
+    (
+        "critic_loss_unknown",
+        train_case("algo.loss_critic_type=l3"),
+        "algo.loss_critic_type is 'l3'; choose one of ['l1', 'l2', 'smooth_l1']",
+    ),
+    (
+        "activation_unknown",
+        train_case("algo.actor.activation=sigmoid"),
+        "algo.actor.activation is 'sigmoid'; choose one of ['elu', 'relu', 'silu', 'tanh']",
+    ),
     (
         "view_unknown",
         train_case("obs.view=sonar"),

@@ -38,12 +38,17 @@ def test_plain_collection_loop_of_the_train_benchmark_is_the_env():
     policy, *_ = make_actor_critic("geo_sincos", "geo_sincos", low, high, hidden, {"hidden": [8], "activation": "tanh"})
     record = []
     bench.plain_collect(plain_env, policy, 25, record=record)
+    assert len(record) == 25
     env = make_env()
     td = env.reset()
+    ended_at = []
     for step, (obs, action) in enumerate(record):
         assert torch.equal(td["geo_sincos"], obs), f"step {step}"
         td["action"] = action
-        _, td = env.step_and_maybe_reset(td)
+        out, td = env.step_and_maybe_reset(td)
+        if out["next", "done"].all():
+            ended_at.append(step + 1)
+    assert ended_at == [10, 20]  # the record runs through two resets of every episode
 
 
 def test_eval_benchmark_times_the_protocols_episodes():

@@ -121,9 +121,12 @@ def test_drag_is_positive_and_lift_vanishes_in_steady_symmetric_flow():
     cfg = SimConfig(re=20, cells_per_d=6, u_lattice=0.12, span=None, x_range=(-4, 8), y_half=4, perturb=0.0)
     sim = CylinderLBM(cfg)
     state = run(sim, 15.0, None, desc="Re=20")
-    cd, cl = state.cd[-1], state.cl[-1]
-    # Re = 20: Cd ~ 2.0 unbounded; this box blocks 12.5% of the channel, which raises it.
-    assert 1.8 < cd < 3.5
+    h = state.history()
+    # The impulsive start leaves pressure waves bouncing in the short box (Cd swings 1.9-3.0): the second half's mean.
+    cd, cl = float(h["cd"][h["t"] > 7.5].mean()), state.cl[-1]
+    # Re = 20: Cd 2.05 unbounded (Dennis & Chang 1970); this box blocks 12.5% of the channel, which raises it by
+    # about a quarter. Measured 2.59.
+    assert 2.3 < cd < 2.9
     assert abs(cl) < 0.05 * cd
     assert np.isfinite(sim.macroscopic()[1].numpy()).all()
 

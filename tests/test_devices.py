@@ -19,22 +19,13 @@ def make_cfg(*overrides):
 
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA")
-def test_cuda_without_cuda_is_one_clear_line():
-    with pytest.raises(ConfigError) as e:
-        resolve_device("cuda")
-    expected = "device=cuda asks for CUDA but torch sees no CUDA device here; use device=cpu"
-    assert str(e.value) == expected
-    from train import validate
-
-    with pytest.raises(ConfigError) as e:
-        validate(make_cfg("device=cuda"))
-    assert str(e.value) == expected
-
-
-def test_bad_device_name_names_the_key():
-    with pytest.raises(ConfigError, match="device=gpu is not a torch device"):
-        resolve_device("gpu")
+def test_resolve_device_keeps_cpu_and_refuses_what_it_cannot_run():
+    """The same messages through train.py and evaluate.py: tests/test_bad_input.py (cases cuda, device_typo)."""
     assert resolve_device("cpu") == torch.device("cpu")
+    with pytest.raises(ConfigError, match=r"^device=cuda asks for CUDA but torch sees no CUDA device here; use"):
+        resolve_device("cuda")
+    with pytest.raises(ConfigError, match=r"^device=gpu is not a torch device \(cpu, cuda, cuda:0\)$"):
+        resolve_device("gpu")
 
 
 def test_check_on_device_names_the_stray_tensor():
@@ -124,5 +115,8 @@ def test_tiny_ppo_trains_on_cuda(tmp_path):
     from train import run
 
     final = run(make_cfg("device=cuda"), tmp_path)
-    assert final["frames"] == 512 and 0.0 <= final["eval/success_rate"] <= 1.0
-    assert load_checkpoint(tmp_path / "checkpoints" / "last.pt")["obs"] == "geo_sincos"
+    assert final["frames"] == 512 and final["eval/episodes"] > 0
+    payload = load_checkpoint(tmp_path / "checkpoints" / "last.pt")
+    assert payload["obs"] == "geo_sincos"
+    weights = payload["policy"]["state_dict"].values()  # saved from the GPU, read on the CPU: finite numbers
+    assert all(w.device.type == "cpu" and torch.isfinite(w).all() for w in weights)

@@ -310,16 +310,17 @@ def test_starts_never_inside_the_cylinder_or_at_the_target():
         ({"views": ("geo", "sonar")}, "unknown observation view"),
         ({"dt": 0.0}, "dt > 0"),
         ({"num_envs": 0}, "num_envs >= 1"),
-        ({"reward": "bad"}, None),
+        ({"reward": "bad"}, "^reward is a RewardConfig \\(flownav.envs.reward\\) or None; got 'bad'$"),
     ],
 )
 def test_bad_env_arguments_are_refused(kwargs, message):
-    if message is None:
-        with pytest.raises(ValueError, match="success_radius > 0"):
-            RewardConfig(success_radius=0.0)
-        return
     with pytest.raises(ValueError, match=message):
         NavigationEnv(still_water(), **kwargs)
+
+
+def test_a_success_radius_of_zero_is_refused():
+    with pytest.raises(ValueError, match="success_radius > 0"):
+        RewardConfig(success_radius=0.0)
 
 
 def conf(group, name):

@@ -98,9 +98,8 @@ def test_short_episodes_are_not_over_counted():
     assert s["failures"]["left_domain"]["count"] == int(fast.sum())
     assert s["failures"]["timeout"]["count"] == int((~fast).sum())
     t_out = ep.time[~fast]
-    # All time out together, at the limit (the env accumulates time in float32: 30 x 0.2 = 5.9999986 < 6 - 1e-6,
-    # so it stops one step late at 6.2; reported to the env's owner).
-    assert (t_out == t_out[0]).all() and 6.0 - 1e-4 <= float(t_out[0]) <= 6.2 + 1e-4
+    # All time out together, at the limit: 30 steps of 0.2, not one step late.
+    assert (t_out == t_out[0]).all() and float(t_out[0]) == pytest.approx(6.0, abs=1e-5)
 
 
 def test_hit_the_cylinder_and_success():
@@ -160,8 +159,9 @@ def test_ego_outcomes_do_not_depend_on_the_misalignment():
         ep = run_episodes(
             ego, "ego", env_factory(flow, RegionTask(), views=("ego",), misalignment_deg=angle), episodes=300
         )
-        out[angle] = ep.status
-    assert (out[0.0] == out[90.0]).float().mean() > 0.97
+        out[angle] = ep
+    assert torch.equal(out[0.0].status, out[90.0].status)
+    assert torch.allclose(out[0.0].time, out[90.0].time, atol=1e-4)
 
 
 # ----------------------------------------------------------------------------- evaluate.py and the suite
@@ -248,9 +248,8 @@ def test_each_experiment_composes_and_runs_tiny(tiny_world, name):
             assert s["successes"] + sum(f["count"] for f in s["failures"].values()) == 24
     if name == "misalignment":
         assert set(r["results"]["student"]) == {f"{a:g}" for a in range(0, 181, 15)}
-    if name == "time_limit":  # a longer limit can only add successes
-        rates = [r["results"]["teacher"][k]["success_rate"] for k in ("1", "2", "3")]
-        assert rates == sorted(rates)
+    if name == "time_limit":  # one row per limit (what each row holds: test_time_limit_rows_equal_runs_at_that_limit)
+        assert set(r["results"]["teacher"]) == {"1", "2", "3"}
     if name in ("figures", "extended", "misalignment", "abc_ablation", "loss_curves"):
         assert r["figures"] and all(Path(f).is_file() for f in r["figures"])
     if name == "loss_curves":

@@ -256,4 +256,6 @@ def test_sb3_ppo_learns_still_water():
     assert len(model.ep_info_buffer) >= 20 and len(model.ep_success_buffer) == len(model.ep_info_buffer)
     trained_return, trained_success = evaluate(lambda o: model.predict(o, deterministic=True)[0])
     assert random_success == 0.0 and random_return < -5  # random turning never reaches the target in 20 time units
-    assert trained_return > random_return + 5 and trained_success > 0
+    # 4,096 steps of SB3's PPO: return -10.3 -> 1.0 and 4 of 20 episodes (measured; 8,192 steps still reach 4 of 20).
+    # The bar is learning through the gymnasium wrapper; flownav's own PPO learns its tiny problem to > 80%.
+    assert trained_return > random_return + 8 and trained_success >= 0.15

@@ -187,8 +187,13 @@ def test_resume_refuses_other_view(tmp_path):
         cfg = compose(
             "config", overrides=["+experiment=baseline_ego", *TINY, "algo.total_frames=8192", f"resume={tmp_path}"]
         )
-    with pytest.raises(ConfigError, match="geo"):
+    expected = (
+        f"resume={tmp_path}: that run trained a teacher on 'geo_sincos' observations but this config asks for 'ego'; "
+        "resume with the same obs (obs=geo_sincos)"
+    )
+    with pytest.raises(ConfigError) as err:
         run(cfg, tmp_path / "x")
+    assert str(err.value) == expected
 
 
 def _student_file(tmp_path, view="geo_sincos", **config):

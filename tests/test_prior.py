@@ -48,13 +48,20 @@ def test_zero_network_is_head_to_target_in_geo_and_ego_views():
 
 
 def test_prior_with_a_trained_correction_differs_and_is_saved_in_the_config():
-    policy = DeterministicPolicy(6, ACTION_LOW, action_high(), hidden=[16], prior="ego")
+    policy = DeterministicPolicy(6, ACTION_LOW, action_high(), hidden=[16], prior="ego", prior_turn=TURN_SHORT)
     assert policy.config["prior"] == "ego"
     assert set(policy.state_dict()) == set(DeterministicPolicy(6, ACTION_LOW, action_high(), hidden=[16]).state_dict())
     copy = DeterministicPolicy(**policy.config)
     copy.load_state_dict(policy.state_dict())
-    obs = torch.randn(64, 6)
+    d, v, theta, psi = _states(64)
+    frame = body_frame(theta, psi)
+    obs = torch.cat((to_body(frame, d), to_body(frame, v)), -1)
     assert torch.equal(copy(obs), policy(obs))
+    # the correction (a freshly initialised last layer, not zero) moves the action off head-to-target ...
+    expected = HeadToTarget()(torch.cat((d, v, theta[:, None], psi[:, None]), -1))
+    assert (policy(obs) - expected).abs().max() > 0.01
+    # ... and without it the same policy is head-to-target again
+    assert torch.allclose(_zero_output(copy)(obs), expected, atol=1e-4)
     assert "prior" not in DeterministicPolicy(6, ACTION_LOW, action_high(), hidden=[16]).config  # old checkpoints
 
 

@@ -92,14 +92,15 @@ def test_teacher_failures_runs_the_protocol(teacher, reference):
 
 
 def test_the_reference_tells_episodes_apart(teacher, reference):
-    """The summaries compared above differ on other episodes (they are not all one outcome)."""
+    """The summaries compared above hold more than one outcome, and other episodes end in other counts."""
     from flownav.checkpoint import load_policy
 
     cfg = compose_config([f"env.time_limit={LIMIT}"])
     flow = build_flow(cfg.flow)
     policy, _ = load_policy(teacher)
     other = evaluate(policy, "geo", EvalSpec(flow, build_task(cfg.task, flow), cfg.env, EPISODES, seed=1))
-    assert other.summary != reference.summary
+    assert len(reference.episodes.status.unique()) >= 2  # more than one outcome ...
+    assert other.summary["failures"] != reference.summary["failures"]  # ... and other episodes end otherwise
 
 
 def test_the_selection_command_writes_the_protocol_summary_and_refuses_a_short_ship(teacher, reference, tmp_path):

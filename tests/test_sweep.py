@@ -52,8 +52,9 @@ def test_summary_groups_configs_and_picks_the_best_seed(tmp_path):
 
 
 def test_multirun_writes_sweep_summary(tmp_path):
+    """Through the default launcher (joblib, two jobs side by side), as a user's -m runs."""
     sweep = tmp_path / "sweep"
-    cmd = [sys.executable, "train.py", "-m", "hydra/launcher=basic", *TINY_PPO, "seed=0,1", f"hydra.sweep.dir={sweep}"]
+    cmd = [sys.executable, "train.py", "-m", *TINY_PPO, "seed=0,1", f"hydra.sweep.dir={sweep}"]
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     s = json.loads((sweep / "sweep_summary.json").read_text())
@@ -65,6 +66,10 @@ def test_multirun_writes_sweep_summary(tmp_path):
     assert group["std"] == pytest.approx(statistics.stdev(scores))
     assert group["best_score"] == max(scores) and group["best_seed"] == scores.index(max(scores))
     assert "| seed0_0 | 0 | (all) |" in (sweep / "sweep_summary.md").read_text()
+    for r in s["runs"]:  # each job wrote its whole run directory
+        job = sweep / r["job"]
+        assert (job / "metrics.csv").is_file() and (job / "checkpoints" / "last.pt").is_file()
+        assert (job / "config.yaml").is_file()
 
 
 def test_resume_auto_continues_the_run_directory_it_runs_in(tmp_path, monkeypatch):

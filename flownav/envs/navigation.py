@@ -104,6 +104,8 @@ class NavigationEnv(EnvBase):
                 raise ValueError(f"{name} is (flow, target, gradient), three standard deviations >= 0; got {sd}")
         if sensor_bias_frame not in ("world", "body"):
             raise ValueError(f"sensor_bias_frame is 'world' or 'body'; got {sensor_bias_frame!r}")
+        if reward is not None and not isinstance(reward, RewardConfig):
+            raise ValueError(f"reward is a RewardConfig (flownav.envs.reward) or None; got {reward!r}")
         super().__init__(device=device, batch_size=torch.Size([num_envs]))
         self.num_envs, self.views, self.time_limit = num_envs, check_views(views), float(time_limit)
         self.settings = Settings(

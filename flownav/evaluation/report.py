@@ -123,7 +123,10 @@ def _performance(seconds: float | None, exps: dict) -> list[str]:
         try:
             lines.append(f"- `python benchmarks/eval_throughput.py`: {json.loads(bench.read_text())['headline']}.")
         except (json.JSONDecodeError, KeyError):
-            pass
+            lines.append(
+                "- benchmarks/results/eval_throughput.json has no readable headline: rerun "
+                "`python benchmarks/eval_throughput.py`."
+            )
     return lines + [""]
 
 
