@@ -34,8 +34,9 @@ def held_out_loss(policy: DeterministicPolicy, obs: torch.Tensor, labels: torch.
     return total / len(obs)
 
 
-def fit(payload: dict, hidden: list[int], obs, labels, train, val, steps: int, reports: int, seed: int):
-    """Yield (step, mean training loss since the last report, held-out loss, seconds) ``reports`` times."""
+def fit(payload: dict, hidden: list[int], obs, labels, train, val, steps: int, reports: int, seed: int, lr_final=None):
+    """Yield (step, mean training loss since the last report, held-out loss, seconds) ``reports`` times. With
+    ``lr_final`` the rate falls linearly from the run's to it over the steps."""
     cfg, algo = payload["policy"]["config"], payload["meta"]["config"]["algo"]
     torch.manual_seed(seed)
     policy = DeterministicPolicy(
@@ -48,9 +49,12 @@ def fit(payload: dict, hidden: list[int], obs, labels, train, val, steps: int, r
         prior_turn=cfg.get("prior_turn"),
     )
     set_normalizer_from(policy, obs[train])
-    optim = torch.optim.Adam(policy.parameters(), lr=float(algo["lr"]))
+    lr = float(algo["lr"])
+    optim = torch.optim.Adam(policy.parameters(), lr=lr)
     every, running, t0 = max(steps // reports, 1), 0.0, time.time()
     for step in range(1, steps + 1):
+        if lr_final is not None:
+            optim.param_groups[0]["lr"] = lr + (lr_final - lr) * (step - 1) / max(steps - 1, 1)
         idx = train[torch.randint(len(train), (int(algo["batch_size"]),))]
         policy.train()
         running += fit_step(policy, optim, obs[idx], labels[idx], algo["grad_clip"])
@@ -67,6 +71,9 @@ def main(argv=None) -> None:
     parser.add_argument("--hidden", nargs="+", default=list(SIZES), help="network sizes, e.g. 256,256 256,256,256")
     parser.add_argument("--steps", type=int, default=8000, help="Adam steps per network")
     parser.add_argument("--reports", type=int, default=4, help="held-out losses printed per network")
+    parser.add_argument(
+        "--lr-final", type=float, default=None, help="the rate at the last step (linear from the run's)"
+    )
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
@@ -83,7 +90,7 @@ def main(argv=None) -> None:
     for spec in args.hidden:
         hidden = [int(h) for h in spec.split(",")]
         for step, train_loss, val_loss, secs in fit(
-            payload, hidden, obs, labels, train, val, args.steps, args.reports, args.seed
+            payload, hidden, obs, labels, train, val, args.steps, args.reports, args.seed, args.lr_final
         ):
             print(f"hidden {spec:>12s}  step {step:6d}  train {train_loss:.4f}  held out {val_loss:.4f}  {secs:5.0f} s")
 

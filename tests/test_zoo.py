@@ -208,7 +208,7 @@ def test_a_narrowed_entry_keeps_its_caps_and_runs(tmp_path):
     assert r["results"]["still_water"]["passive"]["episodes"] == 4
 
 
-def test_to_an_ego_student_the_turned_wake_is_the_posed_wake_with_the_task_turned_back():
+def test_to_an_ego_student_the_turned_wake_is_the_posed_wake_with_the_task_turned_back(capsys):
     """scripts/turned_wake_as_task.py: the zoo's wake turned by 135 degrees with the paper's task, and the wake as posed
     with the task turned by -135 degrees, are the same navigation problem in distribution for a view that turns with
     the swimmer (body-frame flow and target, the vertical; headings uniform at random in both): on the same 2,000
@@ -222,6 +222,16 @@ def test_to_an_ego_student_the_turned_wake_is_the_posed_wake_with_the_task_turne
     assert abs(turned["success_rate"] - posed["success_rate"]) <= 0.03
     h_turned, h_posed = script.compare(suite, "head_to_target", 135.0, 2000).values()
     assert h_turned["success_rate"] > 0.05 and abs(h_turned["success_rate"] - h_posed["success_rate"]) <= 0.03
+    # at another wake angle, with a policy defined on the command line (a geo view: the labellers' diagnosis)
+    straight = "+policies.straight={scripted: head_to_target, obs: geo}"
+    script.main(["135", "2000", "--wake-angles", "90", "--policies", "straight", "--set", straight])
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split(":")[0] for line in lines] == [
+        "straight | the wake turned by 135, the paper's task",
+        "straight | the wake turned by 90, the task turned by -45",
+    ]
+    rates = [float(line.split(": ")[1].split("%")[0]) for line in lines]
+    assert rates[0] == pytest.approx(100 * h_turned["success_rate"]) and abs(rates[1] - rates[0]) <= 3
 
 
 def test_where_episodes_leave_counts_each_face_of_the_box():
