@@ -1,5 +1,7 @@
 """The scene-routed teacher of the generalist students: the simulator's paper-scene flag and the routing."""
 
+import math
+
 import pytest
 import torch
 from omegaconf import OmegaConf
@@ -10,7 +12,7 @@ from flownav.agents.scene_router import CAPPED_MIN_PROGRESS, SceneRoutedTeacher,
 from flownav.builders import build_task
 from flownav.envs import NavigationEnv
 from flownav.envs.core import UPSTREAM_X
-from flownav.envs.observations import GEO_PRIV_FLOW, observation_size
+from flownav.envs.observations import GEO_PRIV_FLOW, observation_size, turn_geo_priv
 from flownav.envs.tasks import REGION_1, REGION_2, FamilyTask, RegionTask
 from flownav.errors import CheckpointError
 from flownav.flows.base import WAKE_BOUNDS
@@ -57,10 +59,14 @@ def test_paper_scene_in_a_family_marks_only_the_posed_wake_member_with_the_paper
     assert torch.equal(flags == 5, turned & ~regions) and torch.equal(flags == 9, turned & regions)
     assert torch.equal(flags == 6, member == 2)
     assert torch.equal(flags == 0, (member < 2) & ~full)  # a weaker swimmer in a wake: none
-    # geo_priv_scene is geo_priv plus the flag
-    both = NavigationEnv(flow, task, num_envs=64, views=("geo_priv", "geo_priv_scene"), seed=1).reset()
-    assert observation_size("geo_priv_scene") == observation_size("geo_priv") + 1
-    assert torch.equal(both["geo_priv_scene"][:, :-1], both["geo_priv"])
+    # geo_priv_scene is geo_priv plus the flow's turn and the flag
+    env = NavigationEnv(flow, task, num_envs=64, views=("geo_priv", "geo_priv_scene"), seed=1)
+    both = env.reset()
+    assert observation_size("geo_priv_scene") == observation_size("geo_priv") + 2
+    assert torch.equal(both["geo_priv_scene"][:, :-2], both["geo_priv"])
+    member = env.flow.params["member"]
+    turn = torch.rad2deg(both["geo_priv_scene"][:, -2])
+    assert turn[member != 1].eq(0).all() and (turn[member == 1] >= 10 - 1e-4).all() and turn.max() <= 80 + 1e-4
 
 
 class Constant(torch.nn.Module):
@@ -77,21 +83,21 @@ class Constant(torch.nn.Module):
 
 def test_the_routed_teacher_hands_the_flagged_rows_to_the_expert():
     generalist, expert = Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9)
-    obs = torch.randn(8, 24)
+    obs = torch.randn(8, 25)
     obs[:, -1] = torch.tensor([1.0, 0.0, 1.0, 0.0, 0.0, 1.0, 2.0, 3.0])
     out = SceneRoutedTeacher(generalist, expert)(obs)
     assert torch.equal(out[obs[:, -1] == 1], torch.tensor([[0.9, -0.5, 0.0]]).expand(3, 3))
     # code 3 (the crossing the other way) without its expert: the generalist
     assert torch.equal(out[(obs[:, -1] == 0) | (obs[:, -1] == 3)], torch.tensor([[0.1, 0.2, 0.3]]).expand(4, 3))
     # code 2 (the paper's scene from upstream of its regions): the flow-compensating expert
-    assert torch.equal(out[6], FlowCompensating()(obs[6:7, :-1])[0])
+    assert torch.equal(out[6], FlowCompensating()(obs[6:7, :-2])[0])
     with_reverse = SceneRoutedTeacher(generalist, expert, reverse=Constant([0.5, 0.0, -0.1], 9))(obs)
     assert torch.equal(with_reverse[7], torch.tensor([0.5, 0.0, -0.1])) and torch.equal(with_reverse[:7], out[:7])
 
 
 def test_the_papers_target_from_elsewhere_goes_to_the_away_expert_or_else_the_papers_teacher():
     generalist, expert = Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9)
-    obs = torch.randn(5, 24)
+    obs = torch.randn(5, 25)
     obs[:, -1] = torch.tensor([4.0, 1.0, 0.0, 4.0, 2.0])
     plain = SceneRoutedTeacher(generalist, expert)(obs)
     assert torch.equal(plain[[0, 1, 3]], torch.tensor([[0.9, -0.5, 0.0]]).expand(3, 3))
@@ -103,7 +109,7 @@ def test_the_papers_target_from_elsewhere_goes_to_the_away_expert_or_else_the_pa
 def test_other_tasks_in_the_posed_wake_go_to_the_posed_expert_or_else_the_wake_expert():
     generalist, expert = Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9)
     wake, posed = Constant([0.4, 0.1, 0.2], 23), Constant([-0.3, 0.6, -0.7], 23)
-    obs = torch.randn(4, 24)
+    obs = torch.randn(4, 25)
     obs[:, -1] = torch.tensor([7.0, 5.0, 0.0, 7.0])
     plain = SceneRoutedTeacher(generalist, expert)(obs)
     assert torch.equal(plain, torch.tensor([[0.1, 0.2, 0.3]]).expand(4, 3))  # neither given: the generalist
@@ -192,16 +198,16 @@ def test_a_full_speed_swimmer_in_a_random_flow_or_one_on_a_current_is_the_free_s
 
 def test_free_flows_go_to_the_flow_compensating_expert_when_asked():
     generalist, expert = Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9)
-    obs = torch.randn(5, 24)
+    obs = torch.randn(5, 25)
     obs[:, -1] = torch.tensor([8.0, 0.0, 8.0, 6.0, 5.0])
     plain = SceneRoutedTeacher(generalist, expert)(obs)
     assert torch.equal(plain, torch.tensor([[0.1, 0.2, 0.3]]).expand(5, 3))
     routed = SceneRoutedTeacher(generalist, expert, free_flows="compensating")(obs)
-    assert torch.equal(routed[[0, 2]], FlowCompensating()(obs[[0, 2], :-1]))
+    assert torch.equal(routed[[0, 2]], FlowCompensating()(obs[[0, 2], :-2]))
     assert torch.equal(routed[[1, 3, 4]], plain[[1, 3, 4]])
     assert not torch.equal(routed[[0, 2]], plain[[0, 2]])
     capped = SceneRoutedTeacher(generalist, expert, free_flows="capped")(obs)
-    assert torch.equal(capped[[0, 2]], FlowCompensating(min_progress=CAPPED_MIN_PROGRESS)(obs[[0, 2], :-1]))
+    assert torch.equal(capped[[0, 2]], FlowCompensating(min_progress=CAPPED_MIN_PROGRESS)(obs[[0, 2], :-2]))
     assert torch.equal(capped[[1, 3, 4]], plain[[1, 3, 4]])
     with pytest.raises(ValueError, match=r"^free_flows is 'all'; choose one of \(None, 'compensating', 'capped'\)"):
         SceneRoutedTeacher(generalist, expert, free_flows="all")
@@ -209,7 +215,7 @@ def test_free_flows_go_to_the_flow_compensating_expert_when_asked():
 
 def test_every_other_wake_episode_goes_to_the_wake_expert_or_else_the_generalist():
     generalist, expert = Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9)
-    obs = torch.randn(6, 24)
+    obs = torch.randn(6, 25)
     obs[:, -1] = torch.tensor([5.0, 0.0, 1.0, 5.0, 4.0, 3.0])
     plain = SceneRoutedTeacher(generalist, expert)(obs)
     assert torch.equal(plain[[0, 1, 3, 5]], torch.tensor([[0.1, 0.2, 0.3]]).expand(4, 3))
@@ -221,7 +227,7 @@ def test_every_other_wake_episode_goes_to_the_wake_expert_or_else_the_generalist
 def test_the_papers_regions_in_other_wakes_go_to_their_expert_or_else_where_the_other_wake_episodes_go():
     generalist, expert = Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9)
     wake, regions = Constant([0.6, -0.2, 0.4], 23), Constant([-0.3, 0.6, -0.7], 23)
-    obs = torch.randn(5, 24)
+    obs = torch.randn(5, 25)
     obs[:, -1] = torch.tensor([9.0, 5.0, 1.0, 9.0, 0.0])
     plain = SceneRoutedTeacher(generalist, expert)(obs)
     assert torch.equal(plain[[0, 1, 3, 4]], torch.tensor([[0.1, 0.2, 0.3]]).expand(4, 3))
@@ -235,8 +241,8 @@ def test_the_papers_regions_in_other_wakes_go_to_their_expert_or_else_where_the_
         DeterministicPolicy(23, LOW, HIGH, hidden=[8]),
         "geo_priv",
         {
-            "scene_expert": ("t.pt", DeterministicPolicy(9, LOW, HIGH, hidden=[8])),
-            "scene_wake_regions_expert": ("r.pt", net),
+            "scene_expert": ("t.pt", DeterministicPolicy(9, LOW, HIGH, hidden=[8]), "geo_sincos"),
+            "scene_wake_regions_expert": ("r.pt", net, "geo_priv"),
         },
     )
     assert routed.wake_regions is net and routed.wake is None
@@ -244,24 +250,24 @@ def test_the_papers_regions_in_other_wakes_go_to_their_expert_or_else_where_the_
 
 def test_currents_go_to_the_flow_compensating_expert_when_asked():
     generalist, expert = Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9)
-    obs = torch.randn(4, 24)
+    obs = torch.randn(4, 25)
     obs[:, -1] = torch.tensor([6.0, 0.0, 6.0, 5.0])
     plain = SceneRoutedTeacher(generalist, expert)(obs)
     assert torch.equal(plain, torch.tensor([[0.1, 0.2, 0.3]]).expand(4, 3))
     routed = SceneRoutedTeacher(generalist, expert, currents="all")(obs)
-    assert torch.equal(routed[[0, 2]], FlowCompensating()(obs[[0, 2], :-1]))
+    assert torch.equal(routed[[0, 2]], FlowCompensating()(obs[[0, 2], :-2]))
     assert torch.equal(routed[[1, 3]], plain[[1, 3]])
 
 
 def test_vertical_routing_sends_only_the_mostly_vertical_currents_to_the_flow_compensating_expert():
     generalist, expert = Constant([0.1, 0.2, 0.3], 23), Constant([0.9, -0.5, 0.0], 9)
-    obs = torch.randn(6, 24)
+    obs = torch.randn(6, 25)
     obs[:, -1] = torch.tensor([6.0, 6.0, 6.0, 6.0, 5.0, 6.0])
     obs[:, GEO_PRIV_FLOW] = torch.tensor(
         [[0.0, 0.0, 0.8], [0.0, 0.0, -0.5], [0.6, 0.0, 0.5], [0.3, -0.4, 0.4], [0.0, 0.0, 0.8], [0.0, 0.0, 0.0]]
     )  # up, down, tilted 40 deg from horizontal, 39 deg, a wake scene, still water
     routed = SceneRoutedTeacher(generalist, expert, currents="vertical")(obs)
-    assert torch.equal(routed[:2], FlowCompensating()(obs[:2, :-1]))
+    assert torch.equal(routed[:2], FlowCompensating()(obs[:2, :-2]))
     assert torch.equal(routed[2:], torch.tensor([[0.1, 0.2, 0.3]]).expand(4, 3))
     assert not torch.equal(routed[:2], routed[2:4])  # the two experts differ on these rows
     with pytest.raises(ValueError, match=r"^currents is True; choose one of \(None, 'all', 'vertical'\)"):
@@ -271,22 +277,28 @@ def test_vertical_routing_sends_only_the_mostly_vertical_currents_to_the_flow_co
 def test_scene_routing_needs_the_generalist_view_and_one_action_box():
     generalist = DeterministicPolicy(23, LOW, HIGH, hidden=[8])
     expert = DeterministicPolicy(9, LOW, HIGH, hidden=[8])
-    routed = scene_routed(generalist, "geo_priv", {"scene_expert": ("teacher.pt", expert)})
+    routed = scene_routed(generalist, "geo_priv", {"scene_expert": ("teacher.pt", expert, "geo_sincos")})
     assert isinstance(routed, SceneRoutedTeacher) and routed.reverse is None
     with pytest.raises(CheckpointError, match="reads 'geo_sincos': pass the generalist teacher"):
-        scene_routed(expert, "geo_sincos", {"scene_expert": ("teacher.pt", expert)})
+        scene_routed(expert, "geo_sincos", {"scene_expert": ("teacher.pt", expert, "geo_sincos")})
     away = DeterministicPolicy(23, LOW, HIGH, hidden=[8])
     routed = scene_routed(
-        generalist, "geo_priv", {"scene_expert": ("t.pt", expert), "scene_away_expert": ("a.pt", away)}
+        generalist,
+        "geo_priv",
+        {"scene_expert": ("t.pt", expert, "geo_sincos"), "scene_away_expert": ("a.pt", away, "geo_priv")},
     )
     assert routed.away is away and routed.reverse is None and routed.wake is None
     wake = DeterministicPolicy(23, LOW, HIGH, hidden=[8])
     routed = scene_routed(
-        generalist, "geo_priv", {"scene_expert": ("t.pt", expert), "scene_wake_expert": ("w.pt", wake)}
+        generalist,
+        "geo_priv",
+        {"scene_expert": ("t.pt", expert, "geo_sincos"), "scene_wake_expert": ("w.pt", wake, "geo_priv")},
     )
     assert routed.wake is wake and routed.away is None and routed.posed is None
     routed = scene_routed(
-        generalist, "geo_priv", {"scene_expert": ("t.pt", expert), "scene_posed_expert": ("p.pt", wake)}
+        generalist,
+        "geo_priv",
+        {"scene_expert": ("t.pt", expert, "geo_sincos"), "scene_posed_expert": ("p.pt", wake, "geo_priv")},
     )
     assert routed.posed is wake and routed.wake is None
     other = DeterministicPolicy(9, LOW, [2.0, 0.785, 1.571], hidden=[8])
@@ -294,7 +306,10 @@ def test_scene_routing_needs_the_generalist_view_and_one_action_box():
         scene_routed(
             generalist,
             "geo_priv",
-            {"scene_expert": ("teacher.pt", expert), "scene_reverse_expert": ("other.pt", other)},
+            {
+                "scene_expert": ("teacher.pt", expert, "geo_sincos"),
+                "scene_reverse_expert": ("other.pt", other, "geo_sincos"),
+            },
         )
 
 
@@ -351,3 +366,82 @@ def test_the_any_start_share_acts_without_the_posed_wake_regions_share():
     in_posed = env.flow.params["member"] == 0
     assert REGION_2.contains(env.state.target).all() and from_region_1[~in_posed].all()
     assert from_region_1[in_posed].float().mean() < 0.1  # Region 1 is a small share of the domain
+
+
+def _rot(a: torch.Tensor) -> torch.Tensor:
+    """[N, 3, 3] rotations about z by ``a``."""
+    c, s, z, o = torch.cos(a), torch.sin(a), torch.zeros_like(a), torch.ones_like(a)
+    return torch.stack((torch.stack((c, -s, z), -1), torch.stack((s, c, z), -1), torch.stack((z, z, o), -1)), 1)
+
+
+def test_turning_geo_priv_back_undoes_a_turn_of_the_whole_scene():
+    """A scene turned by a about z: its vectors R v, heading theta + a, flow R u, gradient R G R^T. Turned back, its
+    geo_priv is the unturned scene's, number for number (the scalars untouched)."""
+    g = torch.Generator().manual_seed(0)
+    n = 64
+    a = (torch.rand(n, generator=g) * 2 - 1) * math.pi
+    d, v, u = (torch.randn(n, 3, generator=g) for _ in range(3))
+    grad = torch.randn(n, 3, 3, generator=g)
+    theta, psi, rest = (torch.rand(n, generator=g) * 2 - 1) * math.pi, torch.rand(n, generator=g), torch.randn(n, 2)
+
+    def geo_priv(d, v, theta, u, grad):
+        heading = torch.stack((torch.cos(theta), torch.sin(theta), psi), -1)
+        return torch.cat((d, v, heading, u, grad.flatten(1), rest), -1)
+
+    r = _rot(a)
+    turn = lambda x: (r @ x[..., None])[..., 0]  # noqa: E731
+    turned = geo_priv(turn(d), turn(v), theta + a, turn(u), r @ grad @ r.transpose(1, 2))
+    assert torch.allclose(turn_geo_priv(turned, a), geo_priv(d, v, theta, u, grad), atol=1e-5)
+    assert torch.equal(turn_geo_priv(turned, torch.zeros(n)), turned)
+
+
+def test_geo_priv_wake_turns_back_each_slots_drawn_rotation_and_the_router_feeds_it_to_its_experts():
+    turned = TransformedFamily([synthetic_wake()], angle_deg=(-90, 90), strength=(1, 1), background=(0, 0))
+    flow = MixtureFamily([turned, UniformFamily()], [1.0, 1.0], WAKE_BOUNDS)
+    env = NavigationEnv(flow, FamilyTask(WAKE_BOUNDS), num_envs=128, views=("geo_priv", "geo_priv_wake"), seed=2)
+    td = env.reset()
+    angle = torch.atan2(env.flow.members[0].params["sin"], env.flow.members[0].params["cos"])
+    in_wake = env.flow.params["member"] == 0
+    assert 30 < in_wake.sum() < 100 and angle[in_wake].abs().max() > 1.0
+    expected = turn_geo_priv(td["geo_priv"], torch.where(in_wake, angle, 0.0))
+    assert torch.allclose(td["geo_priv_wake"], expected, atol=1e-6)
+    assert torch.equal(td["geo_priv_wake"][~in_wake], td["geo_priv"][~in_wake])  # a current is not turned
+    # the routed teacher: an expert trained on geo_priv_wake reads the scene's geo_priv turned back
+    seen = []
+    wake = Recorder([0.6, -0.2, 0.4], seen)
+    obs = torch.randn(4, 25)
+    obs[:, -1] = torch.tensor([5.0, 5.0, 0.0, 9.0])
+    routed = scene_routed(
+        DeterministicPolicy(23, LOW, HIGH, hidden=[8]),
+        "geo_priv",
+        {
+            "scene_expert": ("t.pt", DeterministicPolicy(9, LOW, HIGH, hidden=[8]), "geo_sincos"),
+            "scene_wake_expert": ("w.pt", wake, "geo_priv_wake"),
+        },
+    )
+    assert routed.turned_back == ("wake",)
+    out = routed(obs)
+    assert torch.equal(out[[0, 1, 3]], torch.tensor([[0.6, -0.2, 0.4]]).expand(3, 3))
+    assert torch.equal(seen[0], turn_geo_priv(obs[:, :-2], obs[:, -2]))
+    with pytest.raises(CheckpointError, match=r"^algo.scene_wake_expert w.pt reads 'geo_sincos'; that expert reads "):
+        scene_routed(
+            DeterministicPolicy(23, LOW, HIGH, hidden=[8]),
+            "geo_priv",
+            {
+                "scene_expert": ("t.pt", DeterministicPolicy(9, LOW, HIGH, hidden=[8]), "geo_sincos"),
+                "scene_wake_expert": ("w.pt", DeterministicPolicy(9, LOW, HIGH, hidden=[8]), "geo_sincos"),
+            },
+        )
+
+
+class Recorder(torch.nn.Module):
+    """A constant policy that keeps what it was given."""
+
+    def __init__(self, action, seen: list):
+        super().__init__()
+        self.action, self.seen = torch.tensor(action), seen
+        self.config = {"action_low": LOW, "action_high": HIGH}
+
+    def forward(self, obs):
+        self.seen.append(obs.clone())
+        return self.action.expand(obs.shape[0], 3)

@@ -46,19 +46,21 @@ from flownav.envs.core import (
     SCENE_WAKE,
     SCENE_WAKE_REGIONS,
 )
-from flownav.envs.observations import GEO_PRIV_FLOW, observation_size
+from flownav.envs.observations import GEO_PRIV_FLOW, observation_size, turn_geo_priv
 from flownav.errors import CheckpointError
 
 ROUTED_VIEW = "geo_priv_scene"
 GENERALIST_VIEW = "geo_priv"
+TURNED_BACK_VIEW = "geo_priv_wake"  # geo_priv in the frame of the swimmer's flow as posed
 EXPERT_VIEW = "geo_sincos"
+# The views each expert may read (its checkpoint records which).
 EXPERT_VIEWS = {
-    "scene_expert": EXPERT_VIEW,
-    "scene_reverse_expert": EXPERT_VIEW,
-    "scene_away_expert": GENERALIST_VIEW,
-    "scene_wake_expert": GENERALIST_VIEW,
-    "scene_posed_expert": GENERALIST_VIEW,
-    "scene_wake_regions_expert": GENERALIST_VIEW,
+    "scene_expert": (EXPERT_VIEW,),
+    "scene_reverse_expert": (EXPERT_VIEW,),
+    "scene_away_expert": (GENERALIST_VIEW, TURNED_BACK_VIEW),
+    "scene_wake_expert": (GENERALIST_VIEW, TURNED_BACK_VIEW),
+    "scene_posed_expert": (GENERALIST_VIEW, TURNED_BACK_VIEW),
+    "scene_wake_regions_expert": (GENERALIST_VIEW, TURNED_BACK_VIEW),
 }
 CURRENT_ROUTES = (None, "all", "vertical")  # algo.scene_currents: which currents the flow-compensating expert labels
 # The capped expert's least share of its speed towards the target: of 0.3 / 0.5 / 0.7, 0.3 and 0.5 are at or above
@@ -81,8 +83,9 @@ class SceneRoutedTeacher(nn.Module):
     vertical if ``"vertical"``), the flow-compensating expert for SCENE_FREE if ``free_flows`` is ``"compensating"``
     (capped at :data:`CAPPED_MIN_PROGRESS` if ``"capped"``),
     ``generalist`` elsewhere. ``expert`` and
-    ``reverse`` read the first 9 numbers of the view (``geo_priv`` begins with ``geo_sincos``), the others all but
-    the code."""
+    ``reverse`` read the first 9 numbers of the view (``geo_priv`` begins with ``geo_sincos``), the others its
+    ``geo_priv`` (all but the turn and the code); those of ``away``, ``wake``, ``posed``, ``wake_regions`` named in
+    ``turned_back`` read it turned back by the turn (``geo_priv_wake``)."""
 
     def __init__(
         self,
@@ -96,8 +99,14 @@ class SceneRoutedTeacher(nn.Module):
         posed: nn.Module | None = None,
         free_flows: str | None = None,
         wake_regions: nn.Module | None = None,
+        turned_back: tuple[str, ...] = (),
     ):
         super().__init__()
+        if unknown := set(turned_back) - {"away", "wake", "posed", "wake_regions"}:
+            raise ValueError(
+                f"turned_back names experts that read geo_priv: away, wake, posed, wake_regions; got {unknown}"
+            )
+        self.turned_back = tuple(turned_back)
         self.generalist, self.expert, self.reverse, self.away, self.wake = generalist, expert, reverse, away, wake
         self.posed, self.wake_regions = posed, wake_regions
         if currents not in CURRENT_ROUTES:
@@ -110,7 +119,12 @@ class SceneRoutedTeacher(nn.Module):
         self.expert_size = observation_size(EXPERT_VIEW)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        code, view, geo = obs[:, -1:].round(), obs[:, :-1], obs[:, : self.expert_size]
+        code, view, geo = obs[:, -1:].round(), obs[:, :-2], obs[:, : self.expert_size]
+        back = turn_geo_priv(view, obs[:, -2]) if self.turned_back else view
+
+        def reads(name: str) -> torch.Tensor:
+            return back if name in self.turned_back else view
+
         compensating = code == SCENE_UPSTREAM
         if self.currents is not None:
             current = code == SCENE_CURRENT
@@ -129,13 +143,13 @@ class SceneRoutedTeacher(nn.Module):
                 wake = wake | (code == SCENE_POSED)
             if self.wake_regions is None:  # and so do the paper's regions in the other wakes
                 wake = wake | (code == SCENE_WAKE_REGIONS)
-            out = torch.where(wake, self.wake(view), out)
+            out = torch.where(wake, self.wake(reads("wake")), out)
         if self.wake_regions is not None:
-            out = torch.where(code == SCENE_WAKE_REGIONS, self.wake_regions(view), out)
+            out = torch.where(code == SCENE_WAKE_REGIONS, self.wake_regions(reads("wake_regions")), out)
         if self.posed is not None:
-            out = torch.where(code == SCENE_POSED, self.posed(view), out)
+            out = torch.where(code == SCENE_POSED, self.posed(reads("posed")), out)
         paper = self.expert(geo)
-        out = torch.where(code == SCENE_AWAY, paper if self.away is None else self.away(view), out)
+        out = torch.where(code == SCENE_AWAY, paper if self.away is None else self.away(reads("away")), out)
         return torch.where(code == SCENE_PAPER, paper, out)
 
 
@@ -149,7 +163,7 @@ def scene_routed(
     """The routed teacher of a ``geo_priv`` generalist and its experts: ``experts`` maps the config key
     (``algo.scene_expert``, optionally ``algo.scene_reverse_expert``, ``algo.scene_away_expert``,
     ``algo.scene_wake_expert``, ``algo.scene_posed_expert`` and ``algo.scene_wake_regions_expert``) to (checkpoint
-    name, loaded policy);
+    name, loaded policy, the view its checkpoint records: one of :data:`EXPERT_VIEWS`);
     ``currents``: ``algo.scene_currents``; ``free_flows``: ``algo.scene_free_flows``."""
     if generalist_view != GENERALIST_VIEW:
         raise CheckpointError(
@@ -157,10 +171,17 @@ def scene_routed(
             f"reads {generalist_view!r}: pass the generalist teacher (python train.py +experiment=generalist_teacher)"
         )
     box = lambda p: [round(v, 6) for v in p.config["action_low"] + p.config["action_high"]]  # noqa: E731
-    for key, (name, policy) in experts.items():
+    for key, (name, policy, view) in experts.items():
+        if view not in EXPERT_VIEWS[key]:
+            raise CheckpointError(
+                f"algo.{key} {name} reads {view!r}; that expert reads one of {list(EXPERT_VIEWS[key])}: pass a "
+                "checkpoint trained on one of them"
+            )
         if box(policy) != box(generalist):
             raise CheckpointError(f"algo.{key} {name} acts in another action box than the teacher")
-    loaded = {key: p for key, (_, p) in experts.items()}
+    loaded = {key: p for key, (_, p, _) in experts.items()}
+    # algo.scene_<name>_expert -> <name>
+    turned_back = tuple(key[6:-7] for key, (_, _, view) in experts.items() if view == TURNED_BACK_VIEW)
     return SceneRoutedTeacher(
         generalist,
         loaded["scene_expert"],
@@ -172,4 +193,5 @@ def scene_routed(
         posed=loaded.get("scene_posed_expert"),
         free_flows=free_flows,
         wake_regions=loaded.get("scene_wake_regions_expert"),
+        turned_back=turned_back,
     )

@@ -52,6 +52,7 @@ from flownav.envs.observations import (
     needs_scene,
     needs_swim_speed,
     needs_target_flow,
+    needs_turn,
 )
 from flownav.envs.reward import RewardConfig, step_reward
 from flownav.envs.tasks import REGION_1, REGION_2
@@ -548,6 +549,8 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
         privileged["body_flow_gradient"] = state.body_flow_grad
     if needs_scene(views):
         privileged["paper_scene"] = state.scene.to(state.pos.dtype)
+    if needs_turn(views):
+        privileged["flow_turn"] = flow_turn(flow, settings, state.pos)
     seen = State(
         to_target=flow.displacement(state.pos, state.target),
         velocity=state.vel,
@@ -565,6 +568,14 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
     sensed = [v for v in views if v in SENSED_VIEWS]
     exact = compute_views(seen, [v for v in views if v not in SENSED_VIEWS])
     return exact | compute_views(sensed_state(seen, state, settings), sensed)
+
+
+def flow_turn(flow: FlowField, settings: Settings, pos: Tensor) -> Tensor:
+    """The angle (radians, about z) each slot's flow is turned by from its base flow as posed: a family member's
+    drawn rotation, else the misaligned scene's angle."""
+    if isinstance(flow, FlowFamily):
+        return flow.turn(torch.arange(pos.shape[0], device=pos.device)).to(pos.dtype)
+    return pos.new_full((pos.shape[0],), math.radians(settings.misalignment_deg))
 
 
 def sensed_state(seen: State, state: Swimmers, settings: Settings) -> State:

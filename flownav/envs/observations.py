@@ -34,10 +34,16 @@
   more points in the same look-up), the swim speed U (the action's full speed times the swimmer's speed factor) and
   log(U / (|u| + 0.05)), the swim-speed ratio against the local flow. A teacher that knows how the
   flow varies around it and how strong it is against the flow can plan; an ego student imitates it.
+* ``geo_priv_wake`` (23): ``geo_priv`` seen from the frame of the swimmer's flow as posed: its vectors, heading
+  and gradient turned back by the angle the simulator turned that flow about z (a family member's drawn rotation,
+  a misaligned scene's angle; 0 otherwise). To a network reading it, a wake turned by any angle is the wake as
+  posed, so what it learns at one angle holds at all (the ego views have that invariance by turning with the
+  swimmer; the inertial-frame ``geo_priv`` must learn each angle apart). Walls do not turn: no view reads them.
 * ``geo_priv_around`` (59): ``geo_priv`` plus the flow velocity at 12 points around the swimmer
   (:data:`AROUND_OFFSETS`: 1 and 2 units along +-x, +-y, +-z, inertial frame): what the flow does beyond the
   gradient's reach, for a teacher whose best action depends on where the flow will carry it.
-* ``geo_priv_scene`` (24, a scene-routed teacher's view): ``geo_priv`` plus 1 where the swimmer is in the
+* ``geo_priv_scene`` (25, a scene-routed teacher's view): ``geo_priv``, the angle ``geo_priv_wake`` turns back,
+  and 1 where the swimmer is in the
   paper's training task as posed (the unturned CFD wake at strength 1, full swim speed, the target in Region
   2), 2 there when its episode started upstream of the paper's regions, 4 from any other start, 3 from Region 2
   to a target in Region 1, 7 with any other task there (a family slot), 5 in any other full-speed episode in a
@@ -86,6 +92,7 @@ class State:
     time_left: Tensor | None = None  # [N] fraction of the time limit left; privileged views only
     target_flow: Tensor | None = None  # [N, 3] flow velocity at the target; geo_priv_critic only
     paper_scene: Tensor | None = None  # [N] the paper's scene code (core.paper_scene: 0-9); geo_priv_scene only
+    flow_turn: Tensor | None = None  # [N] the angle the swimmer's flow is turned by about z; geo_priv_wake, _scene
 
 
 # The memory of ``ego_mem``: HISTORY_LEN flow samples, HISTORY_STRIDE steps apart (newest first). With
@@ -155,8 +162,32 @@ def _geo_priv_around(s: State) -> Tensor:
     return torch.cat((_geo_priv(s), s.flow_around.flatten(1)), -1)
 
 
+def turn_geo_priv(obs: Tensor, angle: Tensor) -> Tensor:
+    """Rows that begin with ``geo_priv``'s 23 numbers as seen from a frame turned by ``angle`` [N] about z: the
+    to-target vector, velocity, heading (cos, sin) and flow turned by -angle, the gradient G by R G R^T (R the
+    turn by -angle); the rest as is."""
+    c, s = torch.cos(angle)[:, None], torch.sin(angle)[:, None]
+
+    def back(xy: Tensor) -> Tensor:  # [N, 2, ...]: the x-y pair turned by -angle
+        x, y = xy[:, 0], xy[:, 1]
+        return torch.stack((c * x + s * y, c * y - s * x), 1) if xy.dim() == 3 else back(xy[..., None])[..., 0]
+
+    out = obs.clone()
+    for i in (0, 3, 6, 9):  # to_target, velocity, (cos theta, sin theta), flow: their x-y pairs
+        out[:, i : i + 2] = back(obs[:, i : i + 2])
+    grad = obs[:, 12:21].reshape(-1, 3, 3)  # G[i, j] = du_i / dx_j
+    grad = torch.cat((back(grad[:, :2]), grad[:, 2:]), 1)  # rows: R G
+    grad = torch.cat((back(grad[:, :, :2].transpose(1, 2)).transpose(1, 2), grad[:, :, 2:]), 2)  # columns: (R G) R^T
+    out[:, 12:21] = grad.reshape(-1, 9)
+    return out
+
+
+def _geo_priv_wake(s: State) -> Tensor:
+    return turn_geo_priv(_geo_priv(s), s.flow_turn)
+
+
 def _geo_priv_scene(s: State) -> Tensor:
-    return torch.cat((_geo_priv(s), s.paper_scene[:, None]), -1)
+    return torch.cat((_geo_priv(s), s.flow_turn[:, None], s.paper_scene[:, None]), -1)
 
 
 def _geo_priv_critic(s: State) -> Tensor:
@@ -177,18 +208,20 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "privileged": (14, _privileged),
     "geo_priv": (23, _geo_priv),
     "geo_priv_critic": (27, _geo_priv_critic),
-    "geo_priv_scene": (24, _geo_priv_scene),
+    "geo_priv_scene": (25, _geo_priv_scene),
+    "geo_priv_wake": (23, _geo_priv_wake),
     "geo_priv_around": (23 + 3 * len(AROUND_OFFSETS), _geo_priv_around),
 }
 MEMORY_VIEWS = ("ego_mem", "ego_mem_speed", "ego_mem_grad")
 SENSED_VIEWS = tuple(name for name in VIEWS if name.startswith("ego"))  # on-board sensors: env.sensor_noise
 PHASE_VIEWS = ("privileged",)
 # The views that read the flow's gradient (the env computes it for them) and the time left.
-GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic", "geo_priv_scene", "geo_priv_around")
+GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic", "geo_priv_scene", "geo_priv_around", "geo_priv_wake")
 BODY_GRADIENT_VIEWS = ("ego_mem_grad",)  # the gradient along the body axes (the env computes it for them)
 SWIM_SPEED_VIEWS = (*GRADIENT_VIEWS, "ego_mem_speed")  # the swimmer's own full swim speed
 TARGET_FLOW_VIEWS = ("geo_priv_critic",)
 SCENE_VIEWS = ("geo_priv_scene",)
+TURN_VIEWS = ("geo_priv_scene", "geo_priv_wake")  # the angle the swimmer's flow is turned by
 AROUND_VIEWS = ("geo_priv_around",)
 GEO_VIEWS = tuple(name for name in VIEWS if name.startswith("geo"))  # the teacher's kind: inertial frame
 
@@ -227,6 +260,10 @@ def needs_around(names) -> bool:
 
 def needs_scene(names) -> bool:
     return any(name in SCENE_VIEWS for name in names)
+
+
+def needs_turn(names) -> bool:
+    return any(name in TURN_VIEWS for name in names)
 
 
 def check_views(names) -> tuple[str, ...]:

@@ -161,6 +161,12 @@ class FlowFamily(FlowField):
         ``geo_priv_scene`` view. None here."""
         return torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
 
+    def turn(self, idx: Tensor) -> Tensor:
+        """The angle (radians, about z) by which the flow of each of the slots ``idx`` is turned from its base flow
+        as posed: what the privileged ``geo_priv_wake`` view turns back. 0 here (and for a sum, which has no one
+        frame)."""
+        return torch.zeros(idx.shape[0], device=idx.device)
+
     # ---- what members implement
     def draw(self, n: int, generator: torch.Generator, device) -> dict[str, Tensor]:  # pragma: no cover
         raise NotImplementedError
@@ -343,6 +349,9 @@ class TransformedFamily(FlowFamily):
     def holds_obstacle(self, idx):
         return self.solid.to(idx.device)[self.params["base"][idx]]
 
+    def turn(self, idx):
+        return torch.atan2(self.params["sin"][idx], self.params["cos"][idx])
+
     def wake_as_posed(self, idx):
         p = {key: value[idx] for key, value in self.params.items()}
         unturned = (p["cos"] == 1) & (p["sin"] == 0)
@@ -399,10 +408,14 @@ class MixtureFamily(FlowFamily):
     def holds_uniform(self, idx):
         return self._member_flag("holds_uniform", idx)
 
-    def _member_flag(self, name: str, idx: Tensor) -> Tensor:
-        """A per-slot flag (``wake_as_posed``, ``holds_obstacle``, ``holds_uniform``) of each slot's member."""
+    def turn(self, idx):
+        return self._member_flag("turn", idx, dtype=torch.get_default_dtype())
+
+    def _member_flag(self, name: str, idx: Tensor, dtype=torch.bool) -> Tensor:
+        """A per-slot flag (``wake_as_posed``, ``holds_obstacle``, ``holds_uniform``) or value (``turn``) of each
+        slot's member."""
         member = self.params["member"][idx]
-        flag = torch.zeros(idx.shape[0], dtype=torch.bool, device=idx.device)
+        flag = torch.zeros(idx.shape[0], dtype=dtype, device=idx.device)
         return _route(member, len(self.members), lambda j, rows: getattr(self.members[j], name)(idx[rows]), flag)
 
 
