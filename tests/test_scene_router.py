@@ -18,6 +18,7 @@ from flownav.errors import CheckpointError
 from flownav.flows.base import WAKE_BOUNDS
 from flownav.flows.families import FourierFamily, MixtureFamily, SumFamily, TransformedFamily, UniformFamily
 from flownav.flows.synthetic import synthetic_wake
+from flownav.flows.transforms import RotatedFlow
 from flownav.paths import REPO_ROOT
 
 LOW, HIGH = [0.0, -0.785, -1.571], [1.0, 0.785, 1.571]
@@ -406,6 +407,11 @@ def test_geo_priv_wake_turns_back_each_slots_drawn_rotation_and_the_router_feeds
     expected = turn_geo_priv(td["geo_priv"], torch.where(in_wake, angle, 0.0))
     assert torch.allclose(td["geo_priv_wake"], expected, atol=1e-6)
     assert torch.equal(td["geo_priv_wake"][~in_wake], td["geo_priv"][~in_wake])  # a current is not turned
+    # one flow turned (flow.rotate_deg) in a misaligned scene: the two turns add up
+    views = ("geo_priv", "geo_priv_wake")
+    env = NavigationEnv(RotatedFlow(synthetic_wake(), 40.0, (9.0, 0.0)), views=views, num_envs=32, misalignment_deg=30)
+    td = env.reset()
+    assert torch.allclose(td["geo_priv_wake"], turn_geo_priv(td["geo_priv"], torch.full((32,), math.radians(70))))
     # the routed teacher: an expert trained on geo_priv_wake reads the scene's geo_priv turned back
     seen = []
     wake = Recorder([0.6, -0.2, 0.4], seen)

@@ -550,7 +550,7 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
     if needs_scene(views):
         privileged["paper_scene"] = state.scene.to(state.pos.dtype)
     if needs_turn(views):
-        privileged["flow_turn"] = flow_turn(flow, settings, state.pos)
+        privileged["flow_turn"] = flow_turn(flow, state.pos)
     seen = State(
         to_target=flow.displacement(state.pos, state.target),
         velocity=state.vel,
@@ -570,12 +570,16 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
     return exact | compute_views(sensed_state(seen, state, settings), sensed)
 
 
-def flow_turn(flow: FlowField, settings: Settings, pos: Tensor) -> Tensor:
+def flow_turn(flow: FlowField, pos: Tensor) -> Tensor:
     """The angle (radians, about z) each slot's flow is turned by from its base flow as posed: a family member's
-    drawn rotation, else the misaligned scene's angle."""
+    drawn rotation, else the sum of the rotations the flow is wrapped in (``flow.rotate_deg``, a misaligned scene)."""
     if isinstance(flow, FlowFamily):
         return flow.turn(torch.arange(pos.shape[0], device=pos.device)).to(pos.dtype)
-    return pos.new_full((pos.shape[0],), math.radians(settings.misalignment_deg))
+    angle = 0.0
+    while flow is not None:
+        angle += flow.angle if isinstance(flow, RotatedFlow) else 0.0
+        flow = getattr(flow, "base", None)
+    return pos.new_full((pos.shape[0],), angle)
 
 
 def sensed_state(seen: State, state: Swimmers, settings: Settings) -> State:

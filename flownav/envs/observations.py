@@ -36,9 +36,10 @@
   flow varies around it and how strong it is against the flow can plan; an ego student imitates it.
 * ``geo_priv_wake`` (23): ``geo_priv`` seen from the frame of the swimmer's flow as posed: its vectors, heading
   and gradient turned back by the angle the simulator turned that flow about z (a family member's drawn rotation,
-  a misaligned scene's angle; 0 otherwise). To a network reading it, a wake turned by any angle is the wake as
-  posed, so what it learns at one angle holds at all (the ego views have that invariance by turning with the
-  swimmer; the inertial-frame ``geo_priv`` must learn each angle apart). Walls do not turn: no view reads them.
+  a flow's ``rotate_deg``, a misaligned scene's angle; 0 otherwise). To a network reading it, a wake turned by any
+  angle is the wake as posed, so what it learns at one angle holds at all (the ego views have that invariance by
+  turning with the swimmer; the inertial-frame ``geo_priv`` must learn each angle apart). Walls do not turn: no
+  view reads them.
 * ``geo_priv_around`` (59): ``geo_priv`` plus the flow velocity at 12 points around the swimmer
   (:data:`AROUND_OFFSETS`: 1 and 2 units along +-x, +-y, +-z, inertial frame): what the flow does beyond the
   gradient's reach, for a teacher whose best action depends on where the flow will carry it.
