@@ -180,8 +180,11 @@ def scene_routed(
         if box(policy) != box(generalist):
             raise CheckpointError(f"algo.{key} {name} acts in another action box than the teacher")
     loaded = {key: p for key, (_, p, _) in experts.items()}
-    # algo.scene_<name>_expert -> <name>
-    turned_back = tuple(key[6:-7] for key, (_, _, view) in experts.items() if view == TURNED_BACK_VIEW)
+    turned_back = tuple(
+        key.removeprefix("scene_").removesuffix("_expert")
+        for key, (_, _, view) in experts.items()
+        if view == TURNED_BACK_VIEW
+    )
     return SceneRoutedTeacher(
         generalist,
         loaded["scene_expert"],
