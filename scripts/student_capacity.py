@@ -17,7 +17,7 @@ import time
 import torch
 
 from flownav.agents.networks import DeterministicPolicy
-from flownav.algorithms.dagger import fit_step, imitation_loss, set_normalizer_from
+from flownav.algorithms.dagger import fit_step, imitation_loss, lr_at, set_normalizer_from
 from flownav.checkpoint import load_checkpoint
 
 SIZES = ("256,256", "512,512", "256,256,256", "384,384")
@@ -53,8 +53,7 @@ def fit(payload: dict, hidden: list[int], obs, labels, train, val, steps: int, r
     optim = torch.optim.Adam(policy.parameters(), lr=lr)
     every, running, t0 = max(steps // reports, 1), 0.0, time.time()
     for step in range(1, steps + 1):
-        if lr_final is not None:
-            optim.param_groups[0]["lr"] = lr + (lr_final - lr) * (step - 1) / max(steps - 1, 1)
+        optim.param_groups[0]["lr"] = lr_at({"lr": lr, "lr_final": lr_final, "iterations": steps}, step - 1)
         idx = train[torch.randint(len(train), (int(algo["batch_size"]),))]
         policy.train()
         running += fit_step(policy, optim, obs[idx], labels[idx], algo["grad_clip"])
