@@ -174,8 +174,10 @@ def train(cfg, run_dir) -> dict:
     }
     if a.get("scene_expert"):  # the paper's teacher acts in the paper's scene (flownav/agents/scene_router.py)
         keys = [k for k in EXPERT_VIEWS if a.get(k)]
-        experts = {k: (str(a[k]), load_policy(resolve(str(a[k])), device=device)) for k in keys}
-        experts = {k: (name, policy, payload["obs"]) for k, (name, (policy, payload)) in experts.items()}
+        experts = {}
+        for k in keys:  # (name, policy, the view its checkpoint records: scene_routed checks it)
+            policy, payload = load_policy(resolve(str(a[k])), device=device)
+            experts[k] = (str(a[k]), policy, payload["obs"])
         teacher = scene_routed(
             teacher, teacher_view, experts, currents=a.get("scene_currents"), free_flows=a.get("scene_free_flows")
         )

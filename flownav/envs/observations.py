@@ -71,7 +71,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from flownav.envs.kinematics import to_body
+from flownav.envs.kinematics import body_frame, to_body
 
 
 @dataclass(frozen=True)
@@ -165,21 +165,16 @@ def _geo_priv_around(s: State) -> Tensor:
 
 def turn_geo_priv(obs: Tensor, angle: Tensor) -> Tensor:
     """Rows that begin with ``geo_priv``'s 23 numbers as seen from a frame turned by ``angle`` [N] about z: the
-    to-target vector, velocity, heading (cos, sin) and flow turned by -angle, the gradient G by R G R^T (R the
-    turn by -angle); the rest as is."""
-    c, s = torch.cos(angle)[:, None], torch.sin(angle)[:, None]
-
-    def back(xy: Tensor) -> Tensor:  # [N, 2, ...]: the x-y pair turned by -angle
-        x, y = xy[:, 0], xy[:, 1]
-        return torch.stack((c * x + s * y, c * y - s * x), 1) if xy.dim() == 3 else back(xy[..., None])[..., 0]
-
+    to-target vector, velocity, heading (cos, sin) and flow in that frame (R^T v), the gradient G as R^T G R; the
+    rest as is."""
+    frame = body_frame(angle, torch.zeros_like(angle))  # a level frame turned by angle: R
     out = obs.clone()
-    for i in (0, 3, 6, 9):  # to_target, velocity, (cos theta, sin theta), flow: their x-y pairs
-        out[:, i : i + 2] = back(obs[:, i : i + 2])
+    for i in (0, 3, 9):  # to_target, velocity, flow
+        out[:, i : i + 3] = to_body(frame, obs[:, i : i + 3])
+    heading = torch.cat((obs[:, 6:8], torch.zeros_like(obs[:, :1])), -1)  # (cos theta, sin theta, 0)
+    out[:, 6:8] = to_body(frame, heading)[:, :2]
     grad = obs[:, 12:21].reshape(-1, 3, 3)  # G[i, j] = du_i / dx_j
-    grad = torch.cat((back(grad[:, :2]), grad[:, 2:]), 1)  # rows: R G
-    grad = torch.cat((back(grad[:, :, :2].transpose(1, 2)).transpose(1, 2), grad[:, :, 2:]), 2)  # columns: (R G) R^T
-    out[:, 12:21] = grad.reshape(-1, 9)
+    out[:, 12:21] = (frame.transpose(1, 2) @ grad @ frame).reshape(-1, 9)
     return out
 
 
