@@ -11,7 +11,7 @@ from flownav.agents.networks import DeterministicPolicy
 from flownav.agents.scene_router import CAPPED_MIN_PROGRESS, SceneRoutedTeacher, scene_routed
 from flownav.builders import build_task
 from flownav.envs import NavigationEnv
-from flownav.envs.core import UPSTREAM_X
+from flownav.envs.core import SCENE_REVERSE, UPSTREAM_X
 from flownav.envs.observations import GEO_PRIV_FLOW, observation_size, turn_geo_priv
 from flownav.envs.tasks import REGION_1, REGION_2, FamilyTask, RegionTask
 from flownav.errors import CheckpointError
@@ -425,10 +425,22 @@ def test_geo_priv_wake_turns_back_each_slots_drawn_rotation_and_the_router_feeds
             "scene_wake_expert": ("w.pt", wake, "geo_priv_wake"),
         },
     )
-    assert routed.turned_back == ("wake",)
+    assert routed.views["wake"] == "geo_priv_wake"
     out = routed(obs)
     assert torch.equal(out[[0, 1, 3]], torch.tensor([[0.6, -0.2, 0.4]]).expand(3, 3))
     assert torch.equal(seen[0], turn_geo_priv(obs[:, :-2], obs[:, -2]))
+    # so does a reverse expert trained on it (scene code 3); the paper's SI-2 teacher reads geo_sincos
+    for reverse_view, reads in (("geo_priv_wake", turn_geo_priv(obs[:, :-2], obs[:, -2])), ("geo_sincos", obs[:, :9])):
+        seen.clear()
+        obs[:, -1] = SCENE_REVERSE
+        reverse = Recorder([0.1, 0.2, -0.3], seen)
+        experts = {
+            "scene_expert": ("t.pt", DeterministicPolicy(9, LOW, HIGH, hidden=[8]), "geo_sincos"),
+            "scene_reverse_expert": ("r.pt", reverse, reverse_view),
+        }
+        out = scene_routed(DeterministicPolicy(23, LOW, HIGH, hidden=[8]), "geo_priv", experts)(obs)
+        assert torch.equal(out, torch.tensor([[0.1, 0.2, -0.3]]).expand(4, 3))
+        assert torch.equal(seen[0], reads)
     with pytest.raises(CheckpointError, match=r"^algo.scene_wake_expert w.pt reads 'geo_sincos'; that expert reads "):
         scene_routed(
             DeterministicPolicy(23, LOW, HIGH, hidden=[8]),

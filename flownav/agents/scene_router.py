@@ -9,17 +9,17 @@ the paper's regions (flag 2: the extended domain, ``task.posed_wake_any_start_sh
 expert (flownav/agents/flow_compensating.py), which reaches the target from there where the paper's teacher mostly
 does not. The crossing the other way (flag 3: Region 2 to Region 1, ``task.posed_wake_reverse_share``) goes to an
 expert of that crossing when one is given (``algo.scene_reverse_expert``, e.g. the paper's SI-2 teacher
-``checkpoints/teacher_symmetric.pt``), else to the generalist. Episodes of the paper's target from any other start
-(flag 4: the rest of the extended domain, ``posed_wake_any_start_box`` beyond x = 4) go to
-``algo.scene_away_expert`` when one is given (a ``geo_priv`` checkpoint, e.g. a network that imitates the oracle
-there: +experiment=generalist_away_expert), else to the paper's teacher. Every other episode in a flow of the
-families with an obstacle (flag 5: a CFD wake or a vortex street, turned, scaled or on a current) goes to
-``algo.scene_wake_expert`` when one is given (a ``geo_priv`` checkpoint, e.g. a network that imitates the oracle
-over the wake family:
-+experiment=generalist_wake_expert), else to the generalist; so do the paper's regions in those flows (flag 9)
-unless ``algo.scene_wake_regions_expert`` is given (a ``geo_priv`` network that imitates the oracle on the paper's
-regions in the turned wakes: +experiment=generalist_wake_regions_expert), and any other task in the wake as posed
-(flag 7) unless ``algo.scene_posed_expert`` is given (a ``geo_priv`` network that imitates the oracle there:
+``checkpoints/teacher_symmetric.pt``, or a ``geo_priv`` or ``geo_priv_wake`` network), else to the generalist.
+Episodes of the paper's target from any other start (flag 4: the rest of the extended domain,
+``posed_wake_any_start_box`` beyond x = 4) go to ``algo.scene_away_expert`` when one is given (a ``geo_priv``
+checkpoint, e.g. a network that imitates the oracle there: +experiment=generalist_away_expert), else to the paper's
+teacher. Every other episode in a flow of the families with an obstacle (flag 5: a CFD wake or a vortex street,
+turned, scaled or on a current) goes to ``algo.scene_wake_expert`` when one is given (a ``geo_priv`` checkpoint,
+e.g. a network that imitates the oracle over the wake family: +experiment=generalist_wake_expert), else to the
+generalist; so do the paper's regions in those flows (flag 9) unless ``algo.scene_wake_regions_expert`` is given (a
+``geo_priv`` network that imitates the oracle on the paper's regions in the turned wakes:
++experiment=generalist_wake_regions_expert), and any other task in the wake as posed (flag 7) unless
+``algo.scene_posed_expert`` is given (a ``geo_priv`` network that imitates the oracle there:
 +experiment=generalist_posed_expert). Only full-speed swimmers are flagged there (a weaker swimmer's wake episode
 keeps flag 0). Episodes in a uniform current or still water of the families (flag 6) go to the flow-compensating
 expert with ``algo.scene_currents=all`` (there it swims the straight, fastest track), only the mostly vertical ones
@@ -56,7 +56,7 @@ EXPERT_VIEW = "geo_sincos"
 # The views each expert may read (its checkpoint records which).
 EXPERT_VIEWS = {
     "scene_expert": (EXPERT_VIEW,),
-    "scene_reverse_expert": (EXPERT_VIEW,),
+    "scene_reverse_expert": (EXPERT_VIEW, GENERALIST_VIEW, TURNED_BACK_VIEW),
     "scene_away_expert": (GENERALIST_VIEW, TURNED_BACK_VIEW),
     "scene_wake_expert": (GENERALIST_VIEW, TURNED_BACK_VIEW),
     "scene_posed_expert": (GENERALIST_VIEW, TURNED_BACK_VIEW),
@@ -82,10 +82,9 @@ class SceneRoutedTeacher(nn.Module):
     flow-compensating expert for SCENE_CURRENT if ``currents`` is ``"all"`` (only where the current is mostly
     vertical if ``"vertical"``), the flow-compensating expert for SCENE_FREE if ``free_flows`` is ``"compensating"``
     (capped at :data:`CAPPED_MIN_PROGRESS` if ``"capped"``),
-    ``generalist`` elsewhere. ``expert`` and
-    ``reverse`` read the first 9 numbers of the view (``geo_priv`` begins with ``geo_sincos``), the others its
-    ``geo_priv`` (all but the turn and the code); those of ``away``, ``wake``, ``posed``, ``wake_regions`` named in
-    ``turned_back`` read it turned back by the turn (``geo_priv_wake``)."""
+    ``generalist`` elsewhere. Each expert reads the view ``views`` names for it (by default ``expert`` and
+    ``reverse`` ``geo_sincos``, the view's first 9 numbers, as ``geo_priv`` begins with it; the others ``geo_priv``,
+    all but the turn and the code); ``geo_priv_wake`` is that ``geo_priv`` turned back by the turn."""
 
     def __init__(
         self,
@@ -99,14 +98,12 @@ class SceneRoutedTeacher(nn.Module):
         posed: nn.Module | None = None,
         free_flows: str | None = None,
         wake_regions: nn.Module | None = None,
-        turned_back: tuple[str, ...] = (),
+        views: dict[str, str] | None = None,
     ):
         super().__init__()
-        if unknown := set(turned_back) - {"away", "wake", "posed", "wake_regions"}:
-            raise ValueError(
-                f"turned_back names experts that read geo_priv: away, wake, posed, wake_regions; got {unknown}"
-            )
-        self.turned_back = tuple(turned_back)
+        self.views = {"reverse": EXPERT_VIEW} | (views or {})
+        if bad := {k: v for k, v in self.views.items() if v not in (EXPERT_VIEW, GENERALIST_VIEW, TURNED_BACK_VIEW)}:
+            raise ValueError(f"views names a view the routed teacher cannot feed: {bad}")
         self.generalist, self.expert, self.reverse, self.away, self.wake = generalist, expert, reverse, away, wake
         self.posed, self.wake_regions = posed, wake_regions
         if currents not in CURRENT_ROUTES:
@@ -120,10 +117,11 @@ class SceneRoutedTeacher(nn.Module):
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         code, view, geo = obs[:, -1:].round(), obs[:, :-2], obs[:, : self.expert_size]
-        back = turn_geo_priv(view, obs[:, -2]) if self.turned_back else view
+        back = turn_geo_priv(view, obs[:, -2]) if TURNED_BACK_VIEW in self.views.values() else view
+        inputs = {EXPERT_VIEW: geo, GENERALIST_VIEW: view, TURNED_BACK_VIEW: back}
 
         def reads(name: str) -> torch.Tensor:
-            return back if name in self.turned_back else view
+            return inputs[self.views.get(name, GENERALIST_VIEW)]
 
         compensating = code == SCENE_UPSTREAM
         if self.currents is not None:
@@ -136,7 +134,7 @@ class SceneRoutedTeacher(nn.Module):
         if self.free is not None:
             out = torch.where(code == SCENE_FREE, self.free(view), out)
         if self.reverse is not None:
-            out = torch.where(code == SCENE_REVERSE, self.reverse(geo), out)
+            out = torch.where(code == SCENE_REVERSE, self.reverse(reads("reverse")), out)
         if self.wake is not None:
             wake = code == SCENE_WAKE
             if self.posed is None:  # the posed wake's other tasks go where the other wakes' go
@@ -180,11 +178,7 @@ def scene_routed(
         if box(policy) != box(generalist):
             raise CheckpointError(f"algo.{key} {name} acts in another action box than the teacher")
     loaded = {key: p for key, (_, p, _) in experts.items()}
-    turned_back = tuple(
-        key.removeprefix("scene_").removesuffix("_expert")
-        for key, (_, _, view) in experts.items()
-        if view == TURNED_BACK_VIEW
-    )
+    views = {key.removeprefix("scene_").removesuffix("_expert"): view for key, (_, _, view) in experts.items()}
     return SceneRoutedTeacher(
         generalist,
         loaded["scene_expert"],
@@ -196,5 +190,5 @@ def scene_routed(
         posed=loaded.get("scene_posed_expert"),
         free_flows=free_flows,
         wake_regions=loaded.get("scene_wake_regions_expert"),
-        turned_back=turned_back,
+        views=views,
     )
