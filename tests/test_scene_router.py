@@ -428,7 +428,7 @@ def test_geo_priv_wake_turns_back_each_slots_drawn_rotation_and_the_router_feeds
     assert routed.views["wake"] == "geo_priv_wake"
     out = routed(obs)
     assert torch.equal(out[[0, 1, 3]], torch.tensor([[0.6, -0.2, 0.4]]).expand(3, 3))
-    assert torch.equal(seen[0], turn_geo_priv(obs[:, :-2], obs[:, -2]))
+    assert torch.equal(seen[0], turn_geo_priv(obs[:, :-2], obs[:, -2])[[0, 1, 3]])  # its rows only
     # so does a reverse expert trained on it (scene code 3); the paper's SI-2 teacher reads geo_sincos
     for reverse_view, reads in (("geo_priv_wake", turn_geo_priv(obs[:, :-2], obs[:, -2])), ("geo_sincos", obs[:, :9])):
         seen.clear()
@@ -463,3 +463,42 @@ class Recorder(torch.nn.Module):
     def forward(self, obs):
         self.seen.append(obs.clone())
         return self.action.expand(obs.shape[0], 3)
+
+
+def test_each_expert_labels_only_its_own_rows_as_it_would_the_whole_batch():
+    """The router runs every labeller on its own rows: the labels are those of each expert run on the whole batch."""
+    torch.manual_seed(0)
+    net = lambda n: DeterministicPolicy(n, LOW, HIGH, hidden=[16])  # noqa: E731
+    experts = {
+        "scene_expert": ("t.pt", net(9), "geo_sincos"),
+        "scene_reverse_expert": ("r.pt", net(23), "geo_priv_wake"),
+        "scene_away_expert": ("a.pt", net(23), "geo_priv"),
+        "scene_wake_expert": ("w.pt", net(23), "geo_priv_wake"),
+        "scene_wake_regions_expert": ("g.pt", net(23), "geo_priv"),
+    }
+    routed = scene_routed(net(23), "geo_priv", experts, currents="vertical", free_flows="capped")
+    obs = torch.randn(300, 25)
+    obs[:, -1] = torch.arange(300) % 10
+    view, back = obs[:, :-2], turn_geo_priv(obs[:, :-2], obs[:, -2])
+    whole = {
+        1: experts["scene_expert"][1](obs[:, :9]),
+        3: experts["scene_reverse_expert"][1](back),
+        4: experts["scene_away_expert"][1](view),
+        5: experts["scene_wake_expert"][1](back),
+        7: experts["scene_wake_expert"][1](back),  # no posed expert: as code 5
+        8: routed.free(view),
+        9: experts["scene_wake_regions_expert"][1](view),
+        0: routed.generalist(view),
+    }
+    with torch.no_grad():
+        out = routed(obs)
+        for code, labels in whole.items():
+            rows = obs[:, -1] == code
+            assert torch.allclose(out[rows], labels[rows], atol=1e-6), code
+        assert torch.allclose(out[obs[:, -1] == 2], routed.upstream(view)[obs[:, -1] == 2], atol=1e-6)
+        u = view[:, GEO_PRIV_FLOW]
+        vertical = (u[:, 2].abs() > u[:, :2].norm(dim=-1))[:, None]  # code 6: the mostly vertical currents
+        expected = torch.where(vertical, routed.upstream(view), routed.generalist(view))
+        six = obs[:, -1] == 6
+        assert 0 < (six & vertical[:, 0]).sum() < six.sum()
+        assert torch.allclose(out[six], expected[six], atol=1e-6)

@@ -101,7 +101,7 @@ class SceneRoutedTeacher(nn.Module):
         views: dict[str, str] | None = None,
     ):
         super().__init__()
-        self.views = {"reverse": EXPERT_VIEW} | (views or {})
+        self.views = {"expert": EXPERT_VIEW, "reverse": EXPERT_VIEW} | (views or {})
         if bad := {k: v for k, v in self.views.items() if v not in (EXPERT_VIEW, GENERALIST_VIEW, TURNED_BACK_VIEW)}:
             raise ValueError(f"views names a view the routed teacher cannot feed: {bad}")
         self.generalist, self.expert, self.reverse, self.away, self.wake = generalist, expert, reverse, away, wake
@@ -116,39 +116,59 @@ class SceneRoutedTeacher(nn.Module):
         self.expert_size = observation_size(EXPERT_VIEW)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        code, view, geo = obs[:, -1:].round(), obs[:, :-2], obs[:, : self.expert_size]
-        back = turn_geo_priv(view, obs[:, -2]) if TURNED_BACK_VIEW in self.views.values() else view
-        inputs = {EXPERT_VIEW: geo, GENERALIST_VIEW: view, TURNED_BACK_VIEW: back}
+        # Each row has one code and one labeller: every labeller acts on its own rows only (an expert's MLP on all
+        # rows of a batch cost most of the teacher's time).
+        code, view, turn = obs[:, -1].round(), obs[:, :-2], obs[:, -2]
+        inputs = {
+            EXPERT_VIEW: lambda rows: obs[rows, : self.expert_size],
+            GENERALIST_VIEW: lambda rows: view[rows],
+            TURNED_BACK_VIEW: lambda rows: turn_geo_priv(view[rows], turn[rows]),
+        }
+        taken = torch.zeros_like(code, dtype=torch.bool)
+        out = None
+        for rows, labeller, name in self._routes(code, view):
+            rows = rows & ~taken
+            if not rows.any():
+                continue
+            taken |= rows
+            action = labeller(inputs[self.views.get(name, GENERALIST_VIEW)](rows))
+            out = action.new_zeros(obs.shape[0], action.shape[-1]) if out is None else out
+            out[rows] = action
+        rest = ~taken
+        if out is None:
+            return self.generalist(view)
+        if rest.any():
+            out[rest] = self.generalist(view[rest])
+        return out
 
-        def reads(name: str) -> torch.Tensor:
-            return inputs[self.views.get(name, GENERALIST_VIEW)]
-
+    def _routes(self, code: torch.Tensor, view: torch.Tensor) -> list:
+        """(rows, labeller, the name whose view it reads) for every expert given, first match wins; the generalist
+        labels the rows no route takes."""
         compensating = code == SCENE_UPSTREAM
         if self.currents is not None:
             current = code == SCENE_CURRENT
             if self.currents == "vertical":  # still water (u = 0) stays with the generalist
                 u = view[:, GEO_PRIV_FLOW]
-                current = current & (u[:, 2:].abs() > u[:, :2].norm(dim=-1, keepdim=True))
+                current = current & (u[:, 2:].abs() > u[:, :2].norm(dim=-1)[:, None])[:, 0]
             compensating = compensating | current
-        out = torch.where(compensating, self.upstream(view), self.generalist(view))
+        away = ("expert", self.expert) if self.away is None else ("away", self.away)
+        routes = [
+            (code == SCENE_PAPER, self.expert, "expert"),
+            (code == SCENE_AWAY, away[1], away[0]),
+            (compensating, self.upstream, "upstream"),
+        ]
         if self.free is not None:
-            out = torch.where(code == SCENE_FREE, self.free(view), out)
+            routes.append((code == SCENE_FREE, self.free, "free"))
         if self.reverse is not None:
-            out = torch.where(code == SCENE_REVERSE, self.reverse(reads("reverse")), out)
-        if self.wake is not None:
-            wake = code == SCENE_WAKE
-            if self.posed is None:  # the posed wake's other tasks go where the other wakes' go
-                wake = wake | (code == SCENE_POSED)
-            if self.wake_regions is None:  # and so do the paper's regions in the other wakes
-                wake = wake | (code == SCENE_WAKE_REGIONS)
-            out = torch.where(wake, self.wake(reads("wake")), out)
-        if self.wake_regions is not None:
-            out = torch.where(code == SCENE_WAKE_REGIONS, self.wake_regions(reads("wake_regions")), out)
+            routes.append((code == SCENE_REVERSE, self.reverse, "reverse"))
         if self.posed is not None:
-            out = torch.where(code == SCENE_POSED, self.posed(reads("posed")), out)
-        paper = self.expert(geo)
-        out = torch.where(code == SCENE_AWAY, paper if self.away is None else self.away(reads("away")), out)
-        return torch.where(code == SCENE_PAPER, paper, out)
+            routes.append((code == SCENE_POSED, self.posed, "posed"))
+        if self.wake_regions is not None:
+            routes.append((code == SCENE_WAKE_REGIONS, self.wake_regions, "wake_regions"))
+        if self.wake is not None:  # the posed wake's other tasks and the other wakes' regions, unless routed above
+            wake = (code == SCENE_WAKE) | (code == SCENE_POSED) | (code == SCENE_WAKE_REGIONS)
+            routes.append((wake, self.wake, "wake"))
+        return routes
 
 
 def scene_routed(
