@@ -116,8 +116,8 @@ class SceneRoutedTeacher(nn.Module):
         self.expert_size = observation_size(EXPERT_VIEW)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        # Each row has one code and one labeller: every labeller acts on its own rows only (an expert's MLP on all
-        # rows of a batch cost most of the teacher's time).
+        # Each row has one code and one labeller, which runs on its rows only: every expert's MLP on every row
+        # would take most of the teacher's time.
         code, view, turn = obs[:, -1].round(), obs[:, :-2], obs[:, -2]
         inputs = {
             EXPERT_VIEW: lambda rows: obs[rows, : self.expert_size],
@@ -149,12 +149,12 @@ class SceneRoutedTeacher(nn.Module):
             current = code == SCENE_CURRENT
             if self.currents == "vertical":  # still water (u = 0) stays with the generalist
                 u = view[:, GEO_PRIV_FLOW]
-                current = current & (u[:, 2:].abs() > u[:, :2].norm(dim=-1)[:, None])[:, 0]
+                current = current & (u[:, 2].abs() > u[:, :2].norm(dim=-1))
             compensating = compensating | current
-        away = ("expert", self.expert) if self.away is None else ("away", self.away)
+        away, away_name = (self.expert, "expert") if self.away is None else (self.away, "away")
         routes = [
             (code == SCENE_PAPER, self.expert, "expert"),
-            (code == SCENE_AWAY, away[1], away[0]),
+            (code == SCENE_AWAY, away, away_name),
             (compensating, self.upstream, "upstream"),
         ]
         if self.free is not None:
