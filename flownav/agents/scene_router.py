@@ -48,11 +48,13 @@ from flownav.envs.core import (
 )
 from flownav.envs.observations import GEO_PRIV_FLOW, observation_size, turn_geo_priv
 from flownav.errors import CheckpointError
+from flownav.rows import route_rows
 
 ROUTED_VIEW = "geo_priv_scene"
 GENERALIST_VIEW = "geo_priv"
 TURNED_BACK_VIEW = "geo_priv_wake"  # geo_priv in the frame of the swimmer's flow as posed
 EXPERT_VIEW = "geo_sincos"
+ACTION_SIZE = 3  # (U, dtheta, dpsi): flownav.envs.core.action_bounds
 # The views each expert may read (its checkpoint records which).
 EXPERT_VIEWS = {
     "scene_expert": (EXPERT_VIEW,),
@@ -116,30 +118,24 @@ class SceneRoutedTeacher(nn.Module):
         self.expert_size = observation_size(EXPERT_VIEW)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        # Each row has one code and one labeller, which runs on its rows only: every expert's MLP on every row
-        # would take most of the teacher's time.
+        # Each row has one labeller, which runs on its rows only: every expert's MLP on every row would take most of
+        # the teacher's time.
         code, view, turn = obs[:, -1].round(), obs[:, :-2], obs[:, -2]
         inputs = {
             EXPERT_VIEW: lambda rows: obs[rows, : self.expert_size],
             GENERALIST_VIEW: lambda rows: view[rows],
             TURNED_BACK_VIEW: lambda rows: turn_geo_priv(view[rows], turn[rows]),
         }
-        taken = torch.zeros_like(code, dtype=torch.bool)
-        out = None
-        for rows, labeller, name in self._routes(code, view):
-            rows = rows & ~taken
-            if not rows.any():
-                continue
-            taken |= rows
-            action = labeller(inputs[self.views.get(name, GENERALIST_VIEW)](rows))
-            out = action.new_zeros(obs.shape[0], action.shape[-1]) if out is None else out
-            out[rows] = action
-        rest = ~taken
-        if out is None:
-            return self.generalist(view)
-        if rest.any():
-            out[rest] = self.generalist(view[rest])
-        return out
+        routes = [*self._routes(code, view), (None, self.generalist, "generalist")]
+        choice = torch.full(code.shape, len(routes) - 1, device=code.device)  # no route: the generalist
+        for j in reversed(range(len(routes) - 1)):  # the first route that takes a row labels it
+            choice = torch.where(routes[j][0], j, choice)
+
+        def label(j: int, rows: torch.Tensor) -> torch.Tensor:
+            _, labeller, name = routes[j]
+            return labeller(inputs[self.views.get(name, GENERALIST_VIEW)](rows))
+
+        return route_rows(choice, len(routes), label, obs.new_empty(obs.shape[0], ACTION_SIZE))
 
     def _routes(self, code: torch.Tensor, view: torch.Tensor) -> list:
         """(rows, labeller, the name whose view it reads) for every expert given, first match wins; the generalist

@@ -43,12 +43,13 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import torch
 from torch import Tensor
 
 from flownav.flows.base import WAKE_BOUNDS, Box, FlowField
+from flownav.rows import route_rows
 
 
 def _uniform(n: int, low: float, high: float, gen: torch.Generator, device, *shape) -> Tensor:
@@ -58,17 +59,6 @@ def _uniform(n: int, low: float, high: float, gen: torch.Generator, device, *sha
 def _unit_vectors(n: int, gen: torch.Generator, device, *shape) -> Tensor:
     v = torch.randn(n, *shape, 3, generator=gen, device=device)
     return v / v.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-
-
-def _route(choice: Tensor, count: int, fn: Callable[[int, Tensor], Tensor], out: Tensor) -> Tensor:
-    """``out[rows] = fn(j, rows)`` for the rows whose ``choice`` is j, for every j in range(count)."""
-    if count == 1:  # every row: no gather
-        return fn(0, slice(None))
-    for j in range(count):
-        rows = (choice == j).nonzero().squeeze(-1)
-        if rows.numel():
-            out[rows] = fn(j, rows)
-    return out
 
 
 def _check_range(value, name: str, low: float = 0.0) -> tuple[float, float]:
@@ -342,7 +332,7 @@ class TransformedFamily(FlowFamily):
         def base_velocity(j, rows):
             return self.bases[j].velocity(q[rows], tb[rows])
 
-        u = _route(p["base"], len(self.bases), base_velocity, torch.empty_like(pos))
+        u = route_rows(p["base"], len(self.bases), base_velocity, torch.empty_like(pos))
         u = _rotate(u, p["cos"], p["sin"]) * p["strength"][:, None]
         return u + p["background"].to(pos.dtype)
 
@@ -361,7 +351,7 @@ class TransformedFamily(FlowFamily):
         p = self.slot_params(pos, idx)
         q = self._to_base(pos, p)
         hit = torch.zeros(pos.shape[0], dtype=torch.bool, device=pos.device)
-        return _route(p["base"], len(self.bases), lambda j, rows: self.bases[j].in_obstacle(q[rows]), hit)
+        return route_rows(p["base"], len(self.bases), lambda j, rows: self.bases[j].in_obstacle(q[rows]), hit)
 
 
 class MixtureFamily(FlowFamily):
@@ -391,13 +381,13 @@ class MixtureFamily(FlowFamily):
         def member_velocity(j, rows):
             return self.members[j].velocity(pos[rows], t[rows], slots[rows])
 
-        return _route(member, len(self.members), member_velocity, torch.empty_like(pos))
+        return route_rows(member, len(self.members), member_velocity, torch.empty_like(pos))
 
     def in_obstacle(self, pos, idx=None):
         slots = self.slots(pos, idx)
         member = self.slot_params(pos, idx)["member"]
         hit = torch.zeros(pos.shape[0], dtype=torch.bool, device=pos.device)
-        return _route(member, len(self.members), lambda j, r: self.members[j].in_obstacle(pos[r], slots[r]), hit)
+        return route_rows(member, len(self.members), lambda j, r: self.members[j].in_obstacle(pos[r], slots[r]), hit)
 
     def wake_as_posed(self, idx):
         return self._member_flag("wake_as_posed", idx)
@@ -416,7 +406,7 @@ class MixtureFamily(FlowFamily):
         slot's member."""
         member = self.params["member"][idx]
         flag = torch.zeros(idx.shape[0], dtype=dtype, device=idx.device)
-        return _route(member, len(self.members), lambda j, rows: getattr(self.members[j], name)(idx[rows]), flag)
+        return route_rows(member, len(self.members), lambda j, rows: getattr(self.members[j], name)(idx[rows]), flag)
 
 
 class SumFamily(FlowFamily):
