@@ -452,6 +452,25 @@ def test_geo_priv_wake_turns_back_each_slots_drawn_rotation_and_the_router_feeds
         )
 
 
+def test_the_paper_scene_may_go_to_a_network_in_the_wake_frame():
+    """algo.scene_expert may read geo_priv_wake: it labels the paper's scene (code 1) and, without an away expert, the
+    away starts (code 4) from the view turned back by each row's turn."""
+    torch.manual_seed(0)
+    net = lambda n: DeterministicPolicy(n, LOW, HIGH, hidden=[16])  # noqa: E731
+    experts = {"scene_expert": ("r2.pt", net(23), "geo_priv_wake")}
+    routed = scene_routed(net(23), "geo_priv", experts)
+    obs = torch.randn(40, 25)
+    obs[:, -1] = torch.tensor([1, 4, 0, 5]).repeat(10)
+    back = turn_geo_priv(obs[:, :-2], obs[:, -2])
+    with torch.no_grad():
+        out, labels = routed(obs), experts["scene_expert"][1](back)
+        for code in (1, 4):
+            rows = obs[:, -1] == code
+            assert torch.allclose(out[rows], labels[rows], atol=1e-6)
+        rest = obs[:, -1] >= 5
+        assert not torch.allclose(out[rest], labels[rest], atol=1e-3)
+
+
 class Recorder(torch.nn.Module):
     """A constant policy that keeps what it was given."""
 

@@ -26,7 +26,9 @@ expert with ``algo.scene_currents=all`` (there it swims the straight, fastest tr
 (|u_z| > |u_xy|) with ``algo.scene_currents=vertical``, else to the generalist. Full-speed episodes in the families'
 other flows (flag 8: random flows, and those on a current) go to the flow-compensating expert with
 ``algo.scene_free_flows=compensating`` (there it beats the generalist at full speed), or the same expert with its
-fight against the cross flow capped with ``capped``, else to the generalist.
+fight against the cross flow capped with ``capped``, else to the generalist. The paper's scene itself may go to a
+``geo_priv`` or ``geo_priv_wake`` network instead of the paper's teacher (``algo.scene_expert``), so that one expert
+labels the paper's regions in the posed and the other wakes alike.
 """
 
 from __future__ import annotations
@@ -57,7 +59,7 @@ EXPERT_VIEW = "geo_sincos"
 ACTION_SIZE = 3  # (U, dtheta, dpsi): flownav.envs.core.action_bounds
 # The views each expert may read (its checkpoint records which).
 EXPERT_VIEWS = {
-    "scene_expert": (EXPERT_VIEW,),
+    "scene_expert": (EXPERT_VIEW, GENERALIST_VIEW, TURNED_BACK_VIEW),
     "scene_reverse_expert": (EXPERT_VIEW, GENERALIST_VIEW, TURNED_BACK_VIEW),
     "scene_away_expert": (GENERALIST_VIEW, TURNED_BACK_VIEW),
     "scene_wake_expert": (GENERALIST_VIEW, TURNED_BACK_VIEW),
