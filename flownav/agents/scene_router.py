@@ -21,14 +21,14 @@ turned, scaled or on a current) goes to ``algo.scene_wake_expert`` when one is g
 the oracle on the paper's regions in the turned wakes: +experiment=generalist_wake_regions_expert), and any other
 task in the wake as posed (flag 7) unless ``algo.scene_posed_expert`` is given (a ``geo_priv`` network that
 imitates the oracle there: +experiment=generalist_posed_expert). Only full-speed swimmers are flagged there (a
-weaker swimmer's wake episode keeps flag 0). Episodes in a uniform current or still water of the families (flag 6) go to the flow-compensating
-expert with ``algo.scene_currents=all`` (there it swims the straight, fastest track), only the mostly vertical ones
-(|u_z| > |u_xy|) with ``algo.scene_currents=vertical``, else to the generalist. Full-speed episodes in the families'
-other flows (flag 8: random flows, and those on a current) go to the flow-compensating expert with
-``algo.scene_free_flows=compensating`` (there it beats the generalist at full speed), or the same expert with its
-fight against the cross flow capped with ``capped``, else to the generalist. The paper's scene itself may go to a
-``geo_priv`` or ``geo_priv_wake`` network instead of the paper's teacher (``algo.scene_expert``), so that one expert
-labels the paper's regions in the posed and the other wakes alike.
+weaker swimmer's wake episode keeps flag 0). Episodes in a uniform current or still water of the families (flag 6) go
+to the flow-compensating expert with ``algo.scene_currents=all`` (there it swims the straight, fastest track), only
+the mostly vertical ones (|u_z| > |u_xy|) with ``algo.scene_currents=vertical``, else to the generalist. Full-speed
+episodes in the families' other flows (flag 8: random flows, and those on a current) go to the flow-compensating
+expert with ``algo.scene_free_flows=compensating`` (there it beats the generalist at full speed), or the same expert
+with its fight against the cross flow capped with ``capped``, else to the generalist. The paper's scene itself may go
+to a ``geo_priv`` or ``geo_priv_wake`` network instead of the paper's teacher (``algo.scene_expert``), so that one
+expert labels the paper's regions in the posed and the other wakes alike.
 """
 
 from __future__ import annotations
