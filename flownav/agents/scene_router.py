@@ -18,9 +18,9 @@ turned, scaled or on a current) goes to ``algo.scene_wake_expert`` when one is g
 ``geo_priv_wake`` checkpoint, e.g. a network that imitates the oracle over the wake family in the wake's own frame:
 +experiment=generalist_wake_expert_turned), else to the generalist; so do the paper's regions in those flows (flag
 9) unless ``algo.scene_wake_regions_expert`` is given (a ``geo_priv`` or ``geo_priv_wake`` network that imitates
-the oracle on the paper's regions in the turned wakes: +experiment=generalist_wake_regions_expert), and any other
-task in the wake as posed (flag 7) unless ``algo.scene_posed_expert`` is given (a ``geo_priv`` network that
-imitates the oracle there: +experiment=generalist_posed_expert). Only full-speed swimmers are flagged there (a
+the oracle on the paper's regions in the turned wakes: +experiment=generalist_wake_regions_expert[_strengths]), and
+any other task in the wake as posed (flag 7) unless ``algo.scene_posed_expert`` is given (a ``geo_priv`` network
+that imitates the oracle there: +experiment=generalist_posed_expert). Only full-speed swimmers are flagged there (a
 weaker swimmer's wake episode keeps flag 0). Episodes in a uniform current or still water of the families (flag 6) go
 to the flow-compensating expert with ``algo.scene_currents=all`` (there it swims the straight, fastest track), only
 the mostly vertical ones (|u_z| > |u_xy|) with ``algo.scene_currents=vertical``, else to the generalist. Full-speed
