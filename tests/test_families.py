@@ -404,9 +404,9 @@ def test_a_generalist_student_imitates_a_privileged_teacher(tmp_path):
     assert final["frames"] == 160
     _, payload = load_policy(tmp_path / "run" / "checkpoints" / "last.pt", expect_obs="ego_mem_grad")
     assert payload["meta"]["teacher_checkpoint"] == str(teacher)
-    regions = "checkpoints/generalist_wake_regions_expert_strengths.pt"  # the paper's regions in every wake
-    assert payload["meta"]["scene_expert"] == payload["meta"]["scene_wake_regions_expert"] == regions
-    assert payload["meta"]["scene_reverse_expert"] == "checkpoints/generalist_reverse_expert.pt"  # the crossing back
+    assert payload["meta"]["scene_expert"] == "checkpoints/teacher.pt"  # the routed teacher's expert
+    turned = "checkpoints/generalist_wake_expert_turned.pt"  # the turned wakes' labeller
+    assert payload["meta"]["scene_reverse_expert"] == turned  # labels the crossing back too
 
 
 def test_family_benchmark_code_path_runs():
