@@ -405,8 +405,7 @@ def test_a_generalist_student_imitates_a_privileged_teacher(tmp_path):
     _, payload = load_policy(tmp_path / "run" / "checkpoints" / "last.pt", expect_obs="ego_mem_grad")
     assert payload["meta"]["teacher_checkpoint"] == str(teacher)
     assert payload["meta"]["scene_expert"] == "checkpoints/teacher.pt"  # the routed teacher's expert
-    turned = "checkpoints/generalist_wake_expert_turned.pt"  # the turned wakes' labeller
-    assert payload["meta"]["scene_reverse_expert"] == turned  # labels the crossing back too
+    assert payload["meta"]["scene_reverse_expert"] == "checkpoints/generalist_reverse_expert.pt"  # the crossing back
 
 
 def test_family_benchmark_code_path_runs():
