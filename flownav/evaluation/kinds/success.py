@@ -2,8 +2,8 @@
 
 Targets (``targets`` in the entry): ``{policy, min_success, label}`` is met when the policy's success is at
 least ``min_success``; ``{policy, against, label}`` says how much of ``against``'s success the policy keeps
-(with the paper's ratio when the entry's ``paper`` has both); ``{policy, reference, label}`` is a diagnostic
-line, the policy's success next to the reference's.
+(with the paper's ratio when the entry's ``paper`` has both), met when that is at least ``min_fraction`` if given;
+``{policy, reference, label}`` is a diagnostic line, the policy's success next to the reference's.
 """
 
 from __future__ import annotations
@@ -32,9 +32,13 @@ def success_verdicts(r: dict) -> list[str]:
             o = other["success_rate"]
             po = (paper.get(t["against"]) or {}).get("success")
             on_paper = "" if ps is None or not po else f" (paper: {ps:g}% vs {po:g}%, {100 * ps / po:.1f}%)"
+            verdict = ""
+            if "min_fraction" in t:
+                target = float(t["min_fraction"])
+                verdict = f" -> {'met' if s >= target * o else 'NOT met'} (target >= {100 * target:g}%)"
             lines.append(
                 f"- {t['label']}: {pct(s)} vs {pct(o)}, the {pol} keeps {100 * s / o:.0f}% of the "
-                f"{t['against']}'s success{on_paper}."
+                f"{t['against']}'s success{on_paper}{verdict}."
             )
         elif "reference" in t:
             ref = (res.get(t["reference"]) or {}).get("success_rate")

@@ -10,6 +10,11 @@ Held out means: a case is no member of a training family, by flow type and param
 (:func:`family_member`); a case may name the family it belongs to on purpose (``in_family``: still water,
 uniform currents), and tests/test_zoo.py checks that every case's membership is the one it declares.
 The zoo is for evaluation only: nothing is tuned on it.
+
+Targets (``targets`` in the entry), each over the held-out cases unless it lists ``cases``, met when it holds on
+every one of them: ``{policy, min_success, label}``, the policy's success at least ``min_success``;
+``{policy, beats_reference: true, label}``, at least head-to-target's minus the entry's ``margin``;
+``{policy, min_fraction_of_oracle, label}``, at least that fraction of the oracle's success.
 """
 
 from __future__ import annotations
@@ -66,7 +71,36 @@ def zoo_markdown(r: dict) -> list[str]:
     return _summary_tables(r) + _case_tables(r) if r.get("results") else []
 
 
-@register("zoo", markdown=zoo_markdown)
+def zoo_verdicts(r: dict) -> list[str]:
+    """The report's Targets lines of a zoo result: per target, on how many of its cases it holds, and where not."""
+    results, cases, lines = r.get("results") or {}, r.get("cases") or {}, []
+    margin = float(r.get("margin", 0.02))
+    for t in r.get("targets") or []:
+        pol = t["policy"]
+        names = t.get("cases") or [c for c in results if not (cases.get(c) or {}).get("in_family")]
+        if "min_success" in t:
+            ref, factor, offset = None, 0.0, float(t["min_success"])
+            what = f">= {100 * offset:g}%"
+        elif t.get("beats_reference"):
+            ref, factor, offset = REFERENCE, 1.0, -margin
+            what = f">= {REFERENCE}'s success - {100 * margin:g} points"
+        else:
+            ref, factor, offset = ORACLE, float(t["min_fraction_of_oracle"]), 0.0
+            what = f">= {100 * factor:g}% of the {ORACLE}'s success"
+        rows = {c: results[c] for c in names if pol in results.get(c, {}) and (ref is None or ref in results[c])}
+        if not rows:
+            continue
+        short = []
+        for c, res in rows.items():
+            s, base = res[pol]["success_rate"], res[ref]["success_rate"] if ref else 0.0
+            if s < factor * base + offset:
+                short.append(f"{c} {pct(s)}" + (f" vs the {ref}'s {pct(base)}" if ref else ""))
+        verdict = "met" if not short else f"NOT met, short on {'; '.join(short)}"
+        lines.append(f"- {t['label']}: {len(rows) - len(short)} of {len(rows)} cases {what} -> {verdict}.")
+    return lines
+
+
+@register("zoo", markdown=zoo_markdown, verdicts=zoo_verdicts)
 def run_zoo(suite, name: str, spec, out: dict) -> dict:
     """Run every case of the zoo for every policy; write ``spec.json`` if given."""
     cases, results, flows = {}, {}, {}
