@@ -4,7 +4,8 @@ and the generalist's training cost (wall time of finished runs).
 Run: ``python benchmarks/family_throughput.py [--threads 1] [--batch 4096] [--seconds 4]``. Writes
 ``benchmarks/results/family_throughput.json``. ``python benchmarks/family_throughput.py --cost
 teacher=<run dir> --cost student=<run dir> ...`` writes the training runs' wall times (their
-``final_metrics.json``) to ``benchmarks/results/generalist_cost.json`` (``--cost-file NAME``: NAME.json) instead.
+``final_metrics.json``, and each one's against the first's) to ``benchmarks/results/generalist_cost.json``
+(``--cost-file NAME``: NAME.json) instead.
 
 Every case steps ``NavigationEnv.step_and_maybe_reset`` with random actions (resets included) on the flow
 config ``conf/flow/<name>.yaml`` and the task the generalist trains on (``task=family``; the wake alone: the
@@ -106,6 +107,9 @@ def main():
             "results": [run_cost(spec) for spec in args.cost],
             "targets_min": {"teacher": 60, "student": 20},
         }
+        first = payload["results"][0]["wall_time_min"]
+        for row in payload["results"]:  # runs trained side by side compare as ratios
+            row["wall_time_vs_first"] = row["wall_time_min"] / first
         payload["headline"] = payload["results"][0]
         write_result(args.cost_file, payload)
         return
