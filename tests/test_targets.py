@@ -3,10 +3,15 @@ target the configs declare."""
 
 from __future__ import annotations
 
+import json
+
+from omegaconf import OmegaConf
+
 from flownav.evaluation.kinds.ratio_sweep import verdicts as sweep_verdicts
 from flownav.evaluation.kinds.success import success_verdicts
 from flownav.evaluation.kinds.zoo import zoo_verdicts
 from flownav.evaluation.metrics import wilson_interval
+from flownav.paths import REPO_ROOT
 
 
 def rate(successes: int, episodes: int = 100) -> dict:
@@ -82,3 +87,16 @@ def test_a_fraction_of_another_policy_is_met_or_not_by_min_fraction():
         "-> NOT met (target >= 90%)."
     )
     assert success_verdicts(r | {"targets": [target]}) == ["- L: 70.00% vs 80.00%, the p keeps 88% of the o's success."]
+
+def test_the_shipped_report_judges_every_target_the_configs_declare():
+    """Each target of an experiment in results/paper.json has its line in REPORT.md: a target added to a config
+    reaches the report by rerunning its experiment (the suites' ship=true command)."""
+    shipped = json.loads((REPO_ROOT / "results" / "paper.json").read_text())["experiments"]
+    report = (REPO_ROOT / "REPORT.md").read_text()
+    for path in sorted((REPO_ROOT / "conf" / "evaluate" / "experiment").glob("*.yaml")):
+        for name, entry in (OmegaConf.load(path).get("suite") or {}).items():
+            if name not in shipped or shipped[name].get("skipped"):
+                continue
+            for target in entry.get("targets") or []:
+                missing = f"{path.name}: {name}'s target {target.label!r} is not in REPORT.md"
+                assert f"- {target.label}: " in report, missing

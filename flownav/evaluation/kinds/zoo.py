@@ -84,9 +84,11 @@ def zoo_verdicts(r: dict) -> list[str]:
         elif t.get("beats_reference"):
             ref, factor, offset = REFERENCE, 1.0, -margin
             what = f">= {REFERENCE}'s success - {100 * margin:g} points"
-        else:
+        elif "min_fraction_of_oracle" in t:
             ref, factor, offset = ORACLE, float(t["min_fraction_of_oracle"]), 0.0
             what = f">= {100 * factor:g}% of the {ORACLE}'s success"
+        else:  # no form of this kind: no line (tests/test_targets.py finds a declared target missing from REPORT.md)
+            continue
         rows = {c: results[c] for c in names if pol in results.get(c, {}) and (ref is None or ref in results[c])}
         if not rows:
             continue
