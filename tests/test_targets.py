@@ -88,6 +88,7 @@ def test_a_fraction_of_another_policy_is_met_or_not_by_min_fraction():
     )
     assert success_verdicts(r | {"targets": [target]}) == ["- L: 70.00% vs 80.00%, the p keeps 88% of the o's success."]
 
+
 def test_the_shipped_report_judges_every_target_the_configs_declare():
     """Each target of an experiment in results/paper.json has its line in REPORT.md: a target added to a config
     reaches the report by rerunning its experiment (the suites' ship=true command)."""
