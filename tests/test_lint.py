@@ -1,5 +1,5 @@
-"""The code base stays `ruff check` clean (part of the one test command CI runs), defines its error types in one
-module, and writes every JSON file atomically."""
+"""The code base stays `ruff check` clean and `ruff format` formatted (part of the one test command CI runs),
+defines its error types in one module, and writes every JSON file atomically."""
 
 import ast
 import re
@@ -19,11 +19,12 @@ SOURCES = [
 ]
 
 
-def test_ruff_check_is_clean():
+@pytest.mark.parametrize("command", [["check", "."], ["format", "--check", "."]], ids=["check", "format"])
+def test_ruff_is_clean(command):
     ruff = shutil.which("ruff")
     if ruff is None:
         pytest.fail("ruff is not installed: pip install -e '.[dev]'")
-    result = subprocess.run([ruff, "check", "."], cwd=REPO_ROOT, capture_output=True, text=True)
+    result = subprocess.run([ruff, *command], cwd=REPO_ROOT, capture_output=True, text=True)
     assert result.returncode == 0, result.stdout + result.stderr
 
 
