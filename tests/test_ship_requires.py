@@ -120,8 +120,9 @@ def test_the_generalist_student_ships_only_if_it_holds_still_water_and_every_cur
 
 
 def test_the_noisy_student_ships_only_if_it_is_the_more_robust_policy_in_the_paper_wake():
-    """Its checks add the paper's wake (task and extended domain) at its training noise (the run's env) and at twice
-    it (an env override on the run's flow-free defaults, which differ from its env only in the noise)."""
+    """Its checks add the paper's wake as posed (the paper's task, and Region 2 from starts anywhere) at its training
+    noise (the run's env) and at twice it (an env override on the run's flow-free defaults, which differ from its env
+    only in the noise); none is a zoo case."""
     from omegaconf import OmegaConf
 
     from flownav.builders import compose_config
@@ -137,16 +138,27 @@ def test_the_noisy_student_ships_only_if_it_is_the_more_robust_policy_in_the_pap
     noise = {}
     for key, req in added.items():
         spec = training_spec(payload, 10, req["overrides"])
-        assert isinstance(spec.flow, GridFlow), key  # the paper's wake, not the run's families
-        assert type(spec.task).__name__ == ("FixedTargetTask" if "extended" in key else "RegionTask"), key
+        if key.startswith("paper_task"):
+            assert isinstance(spec.flow, GridFlow) and type(spec.task).__name__ == "RegionTask", key
+        else:  # the wake member alone, unturned, at full strength, on no current: the paper's wake
+            wake = OmegaConf.to_container(compose_config(req["overrides"]).flow)
+            assert wake["members"].keys() == {"wake"}, key
+            assert [wake["members"]["wake"][k] for k in ("angle_deg", "strength", "background")] == [
+                [0.0, 0.0],
+                [1.0, 1.0],
+                [0.0, 0.0],
+            ], key
+            shares = ("posed_wake_regions_share", "posed_wake_any_start_share", "posed_wake_reverse_share")
+            assert [getattr(spec.task, k) for k in shares] == [1.0, 1.0, 0.0], key
         env = OmegaConf.to_container(spec.env_cfg, resolve=True)
-        noise[key] = (env["sensor_noise"]["flow"], env["sensor_noise"]["target"])
+        noise[key] = tuple(env["sensor_noise"][k] for k in ("flow", "target", "gradient"))
         assert {k: v for k, v in env.items() if k != "sensor_noise"} == {
             k: v for k, v in OmegaConf.to_container(run_cfg.env, resolve=True).items() if k != "sensor_noise"
         }
     assert noise == {
-        "paper_task_noise_0.1": (0.1, 0.05),
-        "extended_noise_0.1": (0.1, 0.05),
-        "paper_task_noise_0.2": (0.2, 0.1),
-        "extended_noise_0.2": (0.2, 0.1),
+        "paper_task_noise_0.1": (0.1, 0.05, 0.02),
+        "paper_task_noise_0.2": (0.2, 0.1, 0.04),
+        "any_start_noise_0.1": (0.1, 0.05, 0.02),
+        "any_start_noise_0.2": (0.2, 0.1, 0.04),
     }
+    assert run_cfg.obs == compose_config(["+experiment=generalist_student"]).obs  # its recipe's view
