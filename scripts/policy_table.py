@@ -19,7 +19,7 @@ POLICIES = {
     "baseline": "baseline (paper: PPO on the ego view)",
     "student_robust": "student_robust",
     "generalist_student": "**generalist_student** (`ego_mem_grad`)",
-    "generalist_student_noisy": "generalist_student_noisy (`ego_mem`, trained with noisy sensors)",
+    "generalist_student_noisy": "generalist_student_noisy (`ego_mem_grad`, trained with noisy sensors)",
 }
 
 
