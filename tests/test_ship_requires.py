@@ -121,8 +121,7 @@ def test_the_generalist_student_ships_only_if_it_holds_still_water_and_every_cur
 
 def test_the_noisy_student_ships_only_if_it_is_the_more_robust_policy_in_the_paper_wake():
     """Its checks add the paper's wake as posed (the paper's task, and Region 2 from starts anywhere) at its training
-    noise (the run's env) and at twice it (an env override on the run's flow-free defaults, which differ from its env
-    only in the noise); none is a zoo case."""
+    noise (the run's env) and at twice it (the run's env with its noise keys overridden); none is a zoo case."""
     from omegaconf import OmegaConf
 
     from flownav.builders import compose_config
@@ -162,3 +161,26 @@ def test_the_noisy_student_ships_only_if_it_is_the_more_robust_policy_in_the_pap
         "any_start_noise_0.2": (0.2, 0.1, 0.04),
     }
     assert run_cfg.obs == compose_config(["+experiment=generalist_student"]).obs  # its recipe's view
+
+
+def test_an_override_of_a_key_changes_only_that_key_of_the_runs_own_group():
+    """The selection's ``--override env.sensor_bias.flow=0.1`` measures a run trained with sensor noise under that
+    bias and its own noise, not train.py's noise-free env; a group's choice (``env=default``) takes that config
+    whole; a key the run's config lacks (an older run) comes with its group's other defaults; ``~`` deletes."""
+    from omegaconf import OmegaConf
+
+    from flownav.builders import compose_config
+    from flownav.evaluation.selection import training_spec
+
+    run_cfg = OmegaConf.to_container(compose_config(["+experiment=generalist_student_noisy"]), resolve=True)
+    run_env, defaults = run_cfg["env"], OmegaConf.to_container(compose_config([]).env, resolve=True)
+    assert run_env != defaults  # its training noise
+
+    def env(overrides, config=run_cfg):
+        return OmegaConf.to_container(training_spec({"meta": {"config": config}}, 10, overrides).env_cfg)
+
+    assert env(["env.sensor_bias.flow=0.1"]) == run_env | {"sensor_bias": run_env["sensor_bias"] | {"flow": 0.1}}
+    assert env(["env=default"]) == defaults
+    assert env(["~env.sensor_noise"]) == {k: v for k, v in run_env.items() if k != "sensor_noise"}
+    older = run_cfg | {"env": {k: v for k, v in run_env.items() if k != "sensor_bias"}}
+    assert env(["env.sensor_bias.flow=0.1"], older)["sensor_bias"] == defaults["sensor_bias"] | {"flow": 0.1}

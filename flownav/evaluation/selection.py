@@ -9,7 +9,8 @@
         --ship checkpoints/teacher.pt multirun/teacher/<date>/seed*/checkpoints/last.pt
 
 Each checkpoint is evaluated by :func:`flownav.evaluation.protocol.evaluate` on the flow, task and env
-groups of its own training run (``--override`` changes them), on the held-out seed ``EVAL_SEED``: the
+groups of its own training run (``--override``: ``env=<config>`` replaces the run's group, ``env.<key>=<value>``
+changes one key of it), on the held-out seed ``EVAL_SEED``: the
 same episodes ``evaluate.py`` and the suite measure.
 Where its experiment names checks a shipped policy must pass (``ship_requires`` in
 ``conf/experiment/<name>.yaml``, e.g. still water and currents for the generalist student), each is measured
@@ -35,20 +36,41 @@ PROG = "python -m flownav.evaluation.selection"
 
 
 def training_spec(payload: dict, episodes: int, overrides=(), chunk_size: int = 10_000, seed: int = EVAL_SEED):
-    """The :class:`EvalSpec` of a checkpoint's training flow, task and env (``overrides``: Hydra overrides of
-    train.py's config, which win over the run's own groups)."""
+    """The :class:`EvalSpec` of a checkpoint's training flow, task and env. ``overrides`` are Hydra overrides of
+    train.py's config: a group's choice (``env=abc_periodic``) replaces the run's group with that config, a key
+    (``env.sensor_bias.flow=0.1``) changes that key of the run's own group and keeps the rest of it."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
     from omegaconf import OmegaConf, open_dict
 
     from flownav.builders import build_flow, build_task, compose_config
 
     train_cfg = payload.get("meta", {}).get("config", {})
     cfg = compose_config(list(overrides))
+    parsed = OverridesParser.create().parse_overrides(list(overrides))
     with open_dict(cfg):
         for group in ("flow", "task", "env"):
-            if group in train_cfg and not any(o.startswith((f"{group}=", f"{group}.")) for o in overrides):
-                cfg[group] = OmegaConf.create(train_cfg[group])
+            if group in train_cfg and not any(o.key_or_group == group for o in parsed):
+                keys = [o for o in parsed if o.key_or_group.startswith(f"{group}.")]
+                cfg[group] = _with_overridden_keys(OmegaConf.create(train_cfg[group]), cfg[group], keys, group)
     flow = build_flow(cfg.flow)
     return EvalSpec(flow, build_task(cfg.task, flow), cfg.env, episodes, seed=seed, chunk_size=chunk_size)
+
+
+def _with_overridden_keys(own, composed, overrides, group: str):
+    """The run's ``own`` group with each overridden key set to its ``composed`` value (or deleted by ``~``)."""
+    from omegaconf import DictConfig, OmegaConf
+
+    for o in overrides:
+        parts = o.key_or_group[len(group) + 1 :].split(".")
+        for depth in range(1, len(parts)):  # a parent the run's group holds as null (an older run) comes whole
+            if not isinstance(OmegaConf.select(own, ".".join(parts[:depth])), DictConfig):
+                OmegaConf.update(own, ".".join(parts[:depth]), OmegaConf.select(composed, ".".join(parts[:depth])))
+        parent = OmegaConf.select(own, ".".join(parts[:-1])) if len(parts) > 1 else own
+        if o.is_delete():
+            parent.pop(parts[-1], None)
+        else:
+            parent[parts[-1]] = OmegaConf.select(composed, ".".join(parts))
+    return own
 
 
 def evaluate_checkpoint(path, episodes: int = EPISODES, overrides=(), chunk_size: int = 10_000) -> dict:
@@ -157,7 +179,12 @@ def main(argv=None):
     p.add_argument("--out", required=True)
     p.add_argument("--episodes", type=int, default=EPISODES)
     p.add_argument("--chunk", type=int, default=10_000, help="episodes stepped together")
-    p.add_argument("--override", action="append", default=[], help="Hydra override, e.g. flow=vortex_street")
+    p.add_argument(
+        "--override",
+        action="append",
+        default=[],
+        help="Hydra override: flow=vortex_street takes that config, env.time_limit=100 one key of the run's env",
+    )
     p.add_argument("--threads", type=int, default=2)
     p.add_argument(
         "--ship",
