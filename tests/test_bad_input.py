@@ -213,7 +213,7 @@ CASES = [
     (
         "view_unknown",
         train_case("obs.view=sonar"),
-        "obs.view is 'sonar'; choose one of ['ego', 'ego_flow', 'ego_mem', 'ego_mem_grad', 'ego_mem_speed', 'ego_up', 'geo', 'geo_flow', 'geo_flow_sincos', 'geo_priv', 'geo_priv_around', 'geo_priv_critic', 'geo_priv_scene', 'geo_priv_wake', 'geo_sincos', 'privileged']",
+        "obs.view is 'sonar'; choose one of ['ego', 'ego_flow', 'ego_mem', 'ego_mem_grad', 'ego_mem_grad_track', 'ego_mem_speed', 'ego_up', 'geo', 'geo_flow', 'geo_flow_sincos', 'geo_priv', 'geo_priv_around', 'geo_priv_critic', 'geo_priv_scene', 'geo_priv_wake', 'geo_sincos', 'privileged']",
     ),
     (
         "algo_unknown",

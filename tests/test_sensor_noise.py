@@ -304,15 +304,18 @@ def test_a_bias_no_view_reads_draws_nothing_and_null_is_none():
 
 
 def test_a_biased_env_resumes_exactly_and_the_key_reaches_it():
-    """The episode's bias is part of the saved state; env.sensor_bias.{flow,target,gradient} is the env's."""
-    env = make((0.0, 0.0, 0.0), n=32, bias=(0.1, 0.05, 0.02), views=GRADIENT_VIEWS)
-    run(env, 4)
-    twin = make((0.0, 0.0, 0.0), n=32, seed=99, bias=(0.1, 0.05, 0.02), views=GRADIENT_VIEWS)
+    """The episode's bias (and the track views' memory of the to-target readings) is part of the saved state;
+    env.sensor_bias.{flow,target,gradient} is the env's."""
+    views = (*GRADIENT_VIEWS, "ego_mem_grad_track")
+    env = make((0.0, 0.0, 0.0), n=32, bias=(0.1, 0.05, 0.02), views=views)
+    run(env, 6)
+    twin = make((0.0, 0.0, 0.0), n=32, seed=99, bias=(0.1, 0.05, 0.02), views=views)
     twin.reset()
     twin.load_state_dict(env.state_dict())
     action = torch.full((32, 3), 0.5)
     a, b = (e.step(e._observe().set("action", action))["next"] for e in (env, twin))
     assert torch.equal(a["ego_mem_grad"], b["ego_mem_grad"])
+    assert torch.equal(a["ego_mem_grad_track"], b["ego_mem_grad_track"])
     keys = ["env.sensor_bias.flow=0.1", "env.sensor_bias.target=0.02", "env.sensor_bias.gradient=0.01"]
     cfg = compose_config(["obs=ego_mem", *keys])
     flow = build_flow(cfg.flow)
@@ -368,3 +371,28 @@ def test_the_bias_frame_key_reaches_the_env_and_a_bad_one_is_refused():
     assert built.settings.sensor_bias_frame == "world" and not built.settings.body_bias
     with pytest.raises(ValueError, match="sensor_bias_frame is 'world' or 'body'; got 'up'"):
         NavigationEnv(swirl(), num_envs=2, sensor_bias_frame="up")
+
+
+def test_the_track_memory_holds_the_to_target_readings_of_the_flow_memorys_steps():
+    """ego_mem_grad_track is ego_mem_grad followed by the to-target readings of the flow memory's steps, newest (the
+    one the ego view reports) first, each seen from the current heading; exact sensors remember the true vectors
+    (those of geo, inertial), a biased and noisy sensor its readings as sensed."""
+    n, steps = 64, 2 * HISTORY_STRIDE + 1
+    exact = run(make((0.0, 0.0, 0.0), n=n, views=("geo", "ego_mem_grad", "ego_mem_grad_track")), steps)
+    last = exact[-1]
+    track = last["ego_mem_grad_track"]
+    assert torch.equal(track[:, : -3 * HISTORY_LEN], last["ego_mem_grad"])
+    memory = track[:, -3 * HISTORY_LEN :].view(n, HISTORY_LEN, 3)
+    frame = _frames(last["heading"])
+    for k in range(HISTORY_LEN):  # before the start the swimmer remembers its start reading
+        then = exact[max(len(exact) - 1 - k * HISTORY_STRIDE, 0)]["geo"][:, :3]
+        assert torch.allclose(memory[:, k], to_body(frame, then), atol=1e-5), k
+    errs = make((0.1, 0.05, 0.02), n=n, bias=(0.1, 0.05, 0.02), views=("ego_mem_grad_track",))
+    sensed = run(errs, steps)
+    now = sensed[-1]["ego_mem_grad_track"]
+    assert torch.equal(now[:, -3 * HISTORY_LEN : -3 * (HISTORY_LEN - 1)], now[:, :3])  # the reading the view reports
+    before = sensed[-1 - HISTORY_STRIDE]["ego_mem_grad_track"][:, :3]  # seen then, remembered as it was sensed
+    remembered = now[:, -3 * (HISTORY_LEN - 1) : -3 * (HISTORY_LEN - 2)]
+    assert torch.allclose(_to_world(sensed[-1], remembered), _to_world(sensed[-1 - HISTORY_STRIDE], before), atol=1e-5)
+    exact_then = exact[-1 - HISTORY_STRIDE]["geo"][:, :3]
+    assert not torch.allclose(_to_world(sensed[-1 - HISTORY_STRIDE], before), exact_then, atol=1e-3)  # it errs

@@ -52,6 +52,7 @@ from flownav.envs.observations import (
     needs_scene,
     needs_swim_speed,
     needs_target_flow,
+    needs_track,
     needs_turn,
 )
 from flownav.envs.reward import RewardConfig, step_reward
@@ -144,8 +145,9 @@ class Settings:
 class Swimmers:
     """The batch's state, one row per slot: everything a step reads, and what an exact resume saves.
 
-    ``flow_ring`` (memory views; ``[B, 0, 3]`` without) is written in place, so that a step's cost does not
-    grow with its length: a state handed to :func:`step` or :func:`reset` shares its ring with the result.
+    ``flow_ring`` (memory views; ``[B, 0, 3]`` without) and ``target_ring`` (track views) are written in place, so
+    that a step's cost does not grow with their length: a state handed to :func:`step` or :func:`reset` shares its
+    rings with the result.
     """
 
     pos: Tensor  # [B, 3]
@@ -164,6 +166,7 @@ class Swimmers:
     status: Tensor  # [B] int64, a Status
     steps: Tensor  # [B] int64, steps into the episode
     flow_ring: Tensor  # [B, R, 3] the last R flow samples; all slots step together, so one pointer serves all
+    target_ring: Tensor  # [B, R, 3] the to-target readings of the same steps (track views; [B, 0, 3] without)
     ring_ptr: int
     swim_scale: Tensor  # [B] the factor on the action's speed (settings.swim_speed_scale times the task's draw)
     flow_grad: Tensor  # [B, 3, 3] du_i / dx_j (privileged views)
@@ -225,6 +228,7 @@ def initial_state(num_envs: int, settings: Settings, device) -> Swimmers:
         status=torch.zeros(num_envs, dtype=torch.int64, device=device),
         steps=torch.zeros(num_envs, dtype=torch.int64, device=device),
         flow_ring=z(ring, 3),
+        target_ring=z(ring if needs_track(settings.views) else 0, 3),
         ring_ptr=0,
         swim_scale=torch.full((num_envs,), settings.swim_speed_scale, device=device),
         flow_grad=z(3, 3),
@@ -327,15 +331,19 @@ def reset(state: Swimmers, idx: Tensor, flow: FlowField, settings: Settings, rng
         swim_scale = put(swim_scale, settings.swim_speed_scale * settings.task.swim_speed(idx.numel(), rng, rng.device))
     flow_vel, privileged = sense_flow(flow, settings, strength, ep.start, ep.t0, ep.target, ep.theta, ep.psi, idx)
     require_finite(flow_vel, "the flow velocity at the start", FLOW_FIX, ep.start)
-    d = flow.displacement(ep.start, ep.target).norm(dim=-1)
+    to_target = flow.displacement(ep.start, ep.target)
+    d = to_target.norm(dim=-1)
     zero, zero_int = torch.zeros_like(d), torch.zeros_like(idx)
     error, bias = state.sensor_error, state.sensor_bias
     if settings.noisy:  # drawn last: exact sensors keep the random streams of the other draws
         error = put(error, draw_sensor_error(idx.numel(), rng, settings.sensor_error_width))
     if settings.biased:  # after the fresh errors: sensors without a bias keep their streams
         bias = put(bias, draw_sensor_error(idx.numel(), rng, settings.sensor_error_width))
-    if state.flow_ring.shape[1]:  # no past yet: the swimmer has been sensing its start flow
+    if state.flow_ring.shape[1]:  # no past yet: the swimmer has been sensing its start flow (and target)
         state.flow_ring[idx] = sensed_flow(flow_vel, error[idx], bias[idx], settings, ep.theta, ep.psi)[:, None, :]
+    if state.target_ring.shape[1]:
+        sensed = sensed_to_target(to_target, error[idx], bias[idx], settings, ep.theta, ep.psi)
+        state.target_ring[idx] = sensed[:, None, :]
     state = replace(
         state,
         pos=put(state.pos, ep.start),
@@ -413,6 +421,17 @@ def sensed_flow(
     return flow_vel + reading_error(FLOW_SENSOR, error, bias, settings, frame=frame)
 
 
+def sensed_to_target(
+    to_target: Tensor, error: Tensor, bias: Tensor, settings: Settings, theta: Tensor, psi: Tensor
+) -> Tensor:
+    """The to-target vector as the ego views read it at the heading ``(theta, psi)``, as :func:`sensed_flow` the flow
+    (its error relative to the vector's length)."""
+    if not settings.noisy:
+        return to_target
+    frame = body_frame(theta, psi) if settings.body_bias else None
+    return to_target + reading_error(TARGET_SENSOR, error, bias, settings, to_target.norm(dim=-1, keepdim=True), frame)
+
+
 def keep_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tensor) -> Swimmers:
     """The state with the paper-scene code of the episodes in the slots ``idx`` (when a view reads it): it depends
     only on what a reset draws, so it is computed once per episode, not at every step."""
@@ -444,13 +463,16 @@ def step(
         if rng is None:
             raise ValueError("sensor noise draws from the env's generator: pass rng to step")
         error = draw_sensor_error(pos.shape[0], rng, settings.sensor_error_width)
+    to_target = flow.displacement(pos, state.target)
     ring_ptr = state.ring_ptr
     if state.flow_ring.shape[1]:
         ring_ptr = (ring_ptr + 1) % state.flow_ring.shape[1]
         state.flow_ring[:, ring_ptr] = sensed_flow(flow_vel, error, state.sensor_bias, settings, theta, psi)
+    if state.target_ring.shape[1]:
+        state.target_ring[:, ring_ptr] = sensed_to_target(to_target, error, state.sensor_bias, settings, theta, psi)
 
     radius = settings.reward.success_radius
-    dist = flow.displacement(pos, state.target).norm(dim=-1)
+    dist = to_target.norm(dim=-1)
     # Along the whole step, not only at its end: a fast step must not jump over the success ball.
     success = step_reaches(flow.displacement(state.pos, state.target), moved - state.pos, radius)
     left = ~flow.in_domain(pos)
@@ -558,7 +580,8 @@ def observe(state: Swimmers, flow: FlowField, settings: Settings) -> dict[str, T
         theta=state.theta,
         psi=state.psi,
         frame=body_frame(state.theta, state.psi) if needs_body_frame(views) else None,  # skipped for geo-only
-        flow_history=flow_history(state) if needs_history(views) else None,
+        flow_history=ring_history(state.flow_ring, state.ring_ptr) if needs_history(views) else None,
+        target_history=ring_history(state.target_ring, state.ring_ptr) if needs_track(views) else None,
         flow_phase=flow_phase(state, flow) if needs_phase(views) else None,
         swim_speed=settings.u_max * state.swim_scale if needs_swim_speed(views) else None,
         **privileged,
@@ -645,10 +668,10 @@ def paper_scene(state: Swimmers, flow: FlowField, settings: Settings, idx: Tenso
     return torch.where(reverse, SCENE_REVERSE, code)
 
 
-def flow_history(state: Swimmers) -> Tensor:
-    """The flow HISTORY_STRIDE steps apart, newest (now) first: ``[B, HISTORY_LEN, 3]``."""
-    lags = torch.arange(HISTORY_LEN, device=state.flow_ring.device) * HISTORY_STRIDE
-    return state.flow_ring[:, (state.ring_ptr - lags) % state.flow_ring.shape[1]]
+def ring_history(ring: Tensor, ring_ptr: int) -> Tensor:
+    """A memory ring's samples HISTORY_STRIDE steps apart, newest (now) first: ``[B, HISTORY_LEN, 3]``."""
+    lags = torch.arange(HISTORY_LEN, device=ring.device) * HISTORY_STRIDE
+    return ring[:, (ring_ptr - lags) % ring.shape[1]]
 
 
 def flow_phase(state: Swimmers, flow: FlowField) -> Tensor | None:

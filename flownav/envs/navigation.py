@@ -189,11 +189,11 @@ class NavigationEnv(EnvBase):
                     f"the saved env state holds {state[key].shape[-1]} sensor errors per swimmer, this env {width}: "
                     "build it with the saved run's env.sensor_noise and sensor_bias (a gradient error needs 15, else 6)"
                 )
-        # Env states saved before sensor errors, geo_priv_around or the body-axis gradient existed hold no
-        # sensor_error or sensor_bias (exact sensors: zeros), flow_around (no view read it) or body_flow_grad (zeros
-        # until the next step senses it: an ego_mem_grad run saved then read the inertial gradient and resumes only
-        # approximately).
-        keep = ("sensor_error", "sensor_bias", "flow_around", "body_flow_grad")
+        # Env states saved before sensor errors, geo_priv_around, the body-axis gradient or the track views existed
+        # hold no sensor_error or sensor_bias (exact sensors: zeros), flow_around or target_ring (no view read them)
+        # or body_flow_grad (zeros until the next step senses it: an ego_mem_grad run saved then read the inertial
+        # gradient and resumes only approximately).
+        keep = ("sensor_error", "sensor_bias", "flow_around", "body_flow_grad", "target_ring")
         state = {k: getattr(self.state, k) for k in keep} | dict(state)
         saved = {k: state[k].to(self.device).clone() if torch.is_tensor(state[k]) else state[k] for k in SAVED_FIELDS}
         self.state = core.Swimmers(**saved, scene=self.state.scene)

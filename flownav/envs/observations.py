@@ -22,6 +22,11 @@
   swimmer, not only where it is. Forward differences of step ``GRADIENT_STEP`` along the body axes, so the view
   turns with the swimmer: under a rotation of the scene about z it is unchanged, as the other ego views are.
   The generalist student's view (chosen on the validation set: docs/generalist_variants.md).
+* ``ego_mem_grad_track`` (17 + 6 K, ours): ``ego_mem_grad`` plus the to-target readings of the same K past samples,
+  each in the current body frame: the swimmer's own track against the target. A flow sensor's steady bias reads as a
+  current that is not there, and the velocity and the flow memory carry it alike; how the to-target vector changed
+  shows where the swimmer really went (docs/generalist_variants.md, "The noisy-sensor student trained with a bias
+  too"). On board: the to-target sensor's past readings, turned by the gyro as the flow's are.
 * ``geo_sincos`` (9, ours): ``geo`` with theta as (cos theta, sin theta). theta wraps at +-pi, which is
   heading straight upstream, the very heading of the wake crossing; the angle jumps there and the
   pair does not. Same information as ``geo``. ``geo_flow_sincos``: the same for ``geo_flow`` (SI 1).
@@ -85,6 +90,7 @@ class State:
     psi: Tensor
     frame: Tensor | None  # body frame [N, 3, 3]; None when no ego view is asked for
     flow_history: Tensor | None = None  # [N, HISTORY_LEN, 3] past flow velocities, inertial; memory views only
+    target_history: Tensor | None = None  # [N, HISTORY_LEN, 3] the to-target readings of the same steps; track views
     flow_phase: Tensor | None = None  # [N] flow time / period in [0, 1); None: no period (or not asked for)
     flow_gradient: Tensor | None = None  # [N, 3, 3] du_i / dx_j; privileged views only
     body_flow_gradient: Tensor | None = None  # [N, 3, 3] d u_body_i / d x_body_j; ego_mem_grad only
@@ -121,6 +127,10 @@ def _ego_mem(s: State) -> Tensor:
 
 def _ego_mem_grad(s: State) -> Tensor:
     return torch.cat((_ego_mem(s), s.body_flow_gradient.flatten(1)), -1)
+
+
+def _ego_mem_grad_track(s: State) -> Tensor:
+    return torch.cat((_ego_mem_grad(s), to_body(s.frame, s.target_history).flatten(1)), -1)
 
 
 def _ego_mem_speed(s: State) -> Tensor:
@@ -199,6 +209,7 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "ego_mem": (8 + 3 * HISTORY_LEN, _ego_mem),
     "ego_mem_speed": (9 + 3 * HISTORY_LEN, _ego_mem_speed),
     "ego_mem_grad": (17 + 3 * HISTORY_LEN, _ego_mem_grad),
+    "ego_mem_grad_track": (17 + 6 * HISTORY_LEN, _ego_mem_grad_track),
     "geo_sincos": (9, lambda s: _geo_sincos(s, s.velocity)),
     "geo_flow_sincos": (9, lambda s: _geo_sincos(s, s.flow)),
     "privileged": (14, _privileged),
@@ -208,12 +219,14 @@ VIEWS: dict[str, tuple[int, Callable[[State], Tensor]]] = {
     "geo_priv_wake": (23, _geo_priv_wake),
     "geo_priv_around": (23 + 3 * len(AROUND_OFFSETS), _geo_priv_around),
 }
-MEMORY_VIEWS = ("ego_mem", "ego_mem_speed", "ego_mem_grad")
+MEMORY_VIEWS = ("ego_mem", "ego_mem_speed", "ego_mem_grad", "ego_mem_grad_track")
+TRACK_VIEWS = ("ego_mem_grad_track",)  # a memory of the to-target readings as well
 SENSED_VIEWS = tuple(name for name in VIEWS if name.startswith("ego"))  # on-board sensors: env.sensor_noise
 PHASE_VIEWS = ("privileged",)
 # The views that read the flow's gradient (the env computes it for them) and the time left.
 GRADIENT_VIEWS = ("geo_priv", "geo_priv_critic", "geo_priv_scene", "geo_priv_around", "geo_priv_wake")
-BODY_GRADIENT_VIEWS = ("ego_mem_grad",)  # the gradient along the body axes (the env computes it for them)
+# The gradient along the body axes (the env computes it for them).
+BODY_GRADIENT_VIEWS = ("ego_mem_grad", "ego_mem_grad_track")
 SWIM_SPEED_VIEWS = (*GRADIENT_VIEWS, "ego_mem_speed")  # the swimmer's own full swim speed
 TARGET_FLOW_VIEWS = ("geo_priv_critic",)
 SCENE_VIEWS = ("geo_priv_scene",)
@@ -228,6 +241,10 @@ def needs_body_frame(names) -> bool:
 
 def needs_history(names) -> bool:
     return any(name in MEMORY_VIEWS for name in names)
+
+
+def needs_track(names) -> bool:
+    return any(name in TRACK_VIEWS for name in names)
 
 
 def needs_phase(names) -> bool:
