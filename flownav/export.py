@@ -89,11 +89,12 @@ def _ego(vel_meaning: str) -> list[dict]:
     ]
 
 
-def _memory() -> list[dict]:
+def _memory(name: str = "flow", meaning: str = "local flow velocity", units: str = "L/T") -> list[dict]:
+    """A memory's samples, newest first (the flow's, or with other arguments the to-target readings')."""
     out = []
     for k in range(HISTORY_LEN):
         when = "now" if k == 0 else f"{k * HISTORY_STRIDE} steps ago"
-        out += _vector(f"flow_{k}", f"local flow velocity {when}, in the current body frame", "L/T", _BODY)
+        out += _vector(f"{name}_{k}", f"{meaning} {when}, in the current body frame", units, _BODY)
     return out
 
 
@@ -121,6 +122,7 @@ VIEW_INPUTS = {
     "ego_mem": lambda: [*_ego(_VELOCITY), *_UP, *_memory()],
     "ego_mem_speed": lambda: [*_ego(_VELOCITY), *_UP, *_memory(), _SWIM_SPEED],
     "ego_mem_grad": lambda: [*_ego(_VELOCITY), *_UP, *_memory(), *_gradient()],
+    "ego_mem_grad_track": lambda: [*VIEW_INPUTS["ego_mem_grad"](), *_memory("to_target", f"{_TARGET} as read", "L")],
 }
 
 

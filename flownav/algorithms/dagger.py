@@ -54,7 +54,17 @@ from flownav.paths import resolve
 from flownav.provenance import sha256
 from flownav.runlog import RunLogger, run_summary
 
-STUDENT_VIEWS = ("ego", "ego_flow", "ego_up", "ego_mem", "ego_mem_speed", "ego_mem_grad", "geo", "geo_flow")
+STUDENT_VIEWS = (
+    "ego",
+    "ego_flow",
+    "ego_up",
+    "ego_mem",
+    "ego_mem_speed",
+    "ego_mem_grad",
+    "ego_mem_grad_track",
+    "geo",
+    "geo_flow",
+)
 RESUME_NEEDS = ("buffer", "history")  # DAgger's own entries of last.pt's train_state
 NON_FINITE_FIX = "check algo.lr, algo.grad_clip and algo.weight_decay"
 
