@@ -25,8 +25,9 @@
 * ``ego_mem_grad_track`` (17 + 6 K, ours): ``ego_mem_grad`` plus the to-target readings of the same K past samples,
   each in the current body frame: the swimmer's own track against the target. A flow sensor's steady bias reads as a
   current that is not there, and the velocity and the flow memory carry it alike; how the to-target vector changed
-  shows where the swimmer really went (docs/generalist_variants.md, "The noisy-sensor student trained with a bias
-  too"). On board: the to-target sensor's past readings, turned by the gyro as the flow's are.
+  shows where the swimmer really went. On board: the to-target sensor's past readings, turned by the gyro as the
+  flow's are. (Students of it trained with a bias held the vertical currents no better than ``ego_mem_grad``'s:
+  docs/generalist_variants.md, "The noisy-sensor student trained with a bias too".)
 * ``geo_sincos`` (9, ours): ``geo`` with theta as (cos theta, sin theta). theta wraps at +-pi, which is
   heading straight upstream, the very heading of the wake crossing; the angle jumps there and the
   pair does not. Same information as ``geo``. ``geo_flow_sincos``: the same for ``geo_flow`` (SI 1).
