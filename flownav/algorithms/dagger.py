@@ -46,7 +46,7 @@ from flownav.atomic import atomic_write_text
 from flownav.builders import build_env, build_flow, build_task
 from flownav.checkpoint import RunCheckpoints, load_policy, load_resume_checkpoint
 from flownav.devices import check_on_device, resolve_device
-from flownav.envs.observations import GEO_VIEWS, observation_size
+from flownav.envs.observations import GEO_VIEWS, SENSED_VIEWS, observation_size
 from flownav.episode_window import EpisodeWindow, with_episode_return
 from flownav.errors import CheckpointError, ConfigError
 from flownav.evaluation.protocol import EvalSpec, evaluate
@@ -54,17 +54,7 @@ from flownav.paths import resolve
 from flownav.provenance import sha256
 from flownav.runlog import RunLogger, run_summary
 
-STUDENT_VIEWS = (
-    "ego",
-    "ego_flow",
-    "ego_up",
-    "ego_mem",
-    "ego_mem_speed",
-    "ego_mem_grad",
-    "ego_mem_grad_track",
-    "geo",
-    "geo_flow",
-)
+STUDENT_VIEWS = (*SENSED_VIEWS, "geo", "geo_flow")  # every on-board (ego) view, and the paper's SI geo views
 RESUME_NEEDS = ("buffer", "history")  # DAgger's own entries of last.pt's train_state
 NON_FINITE_FIX = "check algo.lr, algo.grad_clip and algo.weight_decay"
 

@@ -340,10 +340,10 @@ def reset(state: Swimmers, idx: Tensor, flow: FlowField, settings: Settings, rng
     if settings.biased:  # after the fresh errors: sensors without a bias keep their streams
         bias = put(bias, draw_sensor_error(idx.numel(), rng, settings.sensor_error_width))
     if state.flow_ring.shape[1]:  # no past yet: the swimmer has been sensing its start flow (and target)
-        state.flow_ring[idx] = sensed_flow(flow_vel, error[idx], bias[idx], settings, ep.theta, ep.psi)[:, None, :]
-    if state.target_ring.shape[1]:
-        sensed = sensed_to_target(to_target, error[idx], bias[idx], settings, ep.theta, ep.psi)
-        state.target_ring[idx] = sensed[:, None, :]
+        frame = bias_frame(settings, ep.theta, ep.psi)
+        state.flow_ring[idx] = sensed_flow(flow_vel, error[idx], bias[idx], settings, frame)[:, None, :]
+        if state.target_ring.shape[1]:  # a track view is a memory view: its ring steps with the flow's
+            state.target_ring[idx] = sensed_to_target(to_target, error[idx], bias[idx], settings, frame)[:, None, :]
     state = replace(
         state,
         pos=put(state.pos, ep.start),
@@ -410,25 +410,26 @@ def reading_error(
     return out + settings.sensor_bias[sensor] * scale * b
 
 
-def sensed_flow(
-    flow_vel: Tensor, error: Tensor, bias: Tensor, settings: Settings, theta: Tensor, psi: Tensor
-) -> Tensor:
-    """The flow as the ego views' sensor reads it at the heading ``(theta, psi)`` (exact without sensor errors; the
-    heading matters only to a bias that turns with the swimmer, :func:`reading_error`)."""
+def bias_frame(settings: Settings, theta: Tensor, psi: Tensor) -> Tensor | None:
+    """The body frame at the heading ``(theta, psi)`` when a bias turns with the swimmer, else None (nothing to
+    compute: only that bias reads the heading, :func:`reading_error`)."""
+    return body_frame(theta, psi) if settings.body_bias else None
+
+
+def sensed_flow(flow_vel: Tensor, error: Tensor, bias: Tensor, settings: Settings, frame: Tensor | None) -> Tensor:
+    """The flow as the ego views' sensor reads it (exact without sensor errors; ``frame``: :func:`bias_frame`)."""
     if not settings.noisy:
         return flow_vel
-    frame = body_frame(theta, psi) if settings.body_bias else None
     return flow_vel + reading_error(FLOW_SENSOR, error, bias, settings, frame=frame)
 
 
 def sensed_to_target(
-    to_target: Tensor, error: Tensor, bias: Tensor, settings: Settings, theta: Tensor, psi: Tensor
+    to_target: Tensor, error: Tensor, bias: Tensor, settings: Settings, frame: Tensor | None
 ) -> Tensor:
-    """The to-target vector as the ego views read it at the heading ``(theta, psi)``, as :func:`sensed_flow` the flow
-    (its error relative to the vector's length)."""
+    """The to-target vector as the ego views' sensor reads it, its error relative to its length (as
+    :func:`sensed_flow`)."""
     if not settings.noisy:
         return to_target
-    frame = body_frame(theta, psi) if settings.body_bias else None
     return to_target + reading_error(TARGET_SENSOR, error, bias, settings, to_target.norm(dim=-1, keepdim=True), frame)
 
 
@@ -467,9 +468,10 @@ def step(
     ring_ptr = state.ring_ptr
     if state.flow_ring.shape[1]:
         ring_ptr = (ring_ptr + 1) % state.flow_ring.shape[1]
-        state.flow_ring[:, ring_ptr] = sensed_flow(flow_vel, error, state.sensor_bias, settings, theta, psi)
-    if state.target_ring.shape[1]:
-        state.target_ring[:, ring_ptr] = sensed_to_target(to_target, error, state.sensor_bias, settings, theta, psi)
+        frame = bias_frame(settings, theta, psi)
+        state.flow_ring[:, ring_ptr] = sensed_flow(flow_vel, error, state.sensor_bias, settings, frame)
+        if state.target_ring.shape[1]:
+            state.target_ring[:, ring_ptr] = sensed_to_target(to_target, error, state.sensor_bias, settings, frame)
 
     radius = settings.reward.success_radius
     dist = to_target.norm(dim=-1)
@@ -611,9 +613,8 @@ def sensed_state(seen: State, state: Swimmers, settings: Settings) -> State:
     body-axis gradient with its error (the memory already holds the readings as sensed)."""
     error, bias = state.sensor_error, state.sensor_bias
     flow_error = reading_error(FLOW_SENSOR, error, bias, settings, frame=seen.frame)
-    d = seen.to_target
-    d_error = reading_error(TARGET_SENSOR, error, bias, settings, d.norm(dim=-1, keepdim=True), seen.frame)
-    sensed = replace(seen, flow=seen.flow + flow_error, velocity=seen.velocity + flow_error, to_target=d + d_error)
+    to_target = sensed_to_target(seen.to_target, error, bias, settings, seen.frame)
+    sensed = replace(seen, flow=seen.flow + flow_error, velocity=seen.velocity + flow_error, to_target=to_target)
     if settings.gradient_noisy and seen.body_flow_gradient is not None:
         gradient_error = reading_error(GRADIENT_SENSOR, error, bias, settings).view(-1, 3, 3)
         sensed = replace(sensed, body_flow_gradient=seen.body_flow_gradient + gradient_error)
