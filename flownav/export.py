@@ -26,6 +26,7 @@ from flownav.envs.observations import HISTORY_LEN, HISTORY_STRIDE
 from flownav.errors import ConfigError, reported_as_one_line
 from flownav.paths import REPO_ROOT, RESULTS_DIR, resolve
 from flownav.provenance import sha256
+from flownav.shipping import is_shipped
 
 FORMATS = {"onnx": ".onnx", "torchscript": ".pt"}
 ARGUMENTS = ("checkpoint", "format", "out")
@@ -266,6 +267,11 @@ def export_policy(checkpoint, fmt: str = "onnx", out=None) -> tuple[Path, Path]:
     policy, payload = load_policy(checkpoint)
     out = Path(out) if out else Path("exports") / f"{checkpoint.stem}{FORMATS[fmt]}"
     card_path = out.with_name(out.name + ".json")
+    if is_shipped(out) or is_shipped(card_path):  # an export is never a shipped file (flownav/shipping.py)
+        raise ConfigError(
+            f"out={out} is in a shipped place (checkpoints/, results/, data/ or REPORT.md); write the export "
+            "elsewhere, e.g. the default exports/"
+        )
     card = make_card(checkpoint, payload, policy, fmt, out)
     card_json = json.dumps(card, indent=2)
     example = torch.zeros(2, policy.config["obs_dim"])

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 from flownav.errors import ConfigError
 
-INT, FLOAT, BOOL, STR, INTS, FLOATS, BOOLS, STRS, DICTS, BOX, DEVICE = (
+INT, FLOAT, BOOL, STR, INTS, FLOATS, BOOLS, STRS, DICTS, MAPPING, BOX, DEVICE = (
     "int",
     "float",
     "bool",
@@ -31,6 +31,7 @@ INT, FLOAT, BOOL, STR, INTS, FLOATS, BOOLS, STRS, DICTS, BOX, DEVICE = (
     "bools",
     "strs",
     "dicts",
+    "mapping",
     "box",
     "device",
 )
@@ -74,6 +75,7 @@ class Key:
             BOOLS: f"a list of {self.size or 'any number of'} true/false values",
             STRS: "a list of strings",
             DICTS: "a list of objects",
+            MAPPING: "a group of keys",
             BOX: BOX_SHAPE,
             DEVICE: "a torch device (cpu, cuda, cuda:0)",
         }[self.kind]
@@ -94,6 +96,11 @@ def Bool() -> Key:
 
 def Str(choices=(), null=False, required=False) -> Key:
     return Key(STR, choices=tuple(choices), null=null, required=required)
+
+
+def Keywords(null=False) -> Key:
+    """A group of keys the schema does not list: a constructor's keywords, checked by that constructor."""
+    return Key(MAPPING, null=null)
 
 
 def _is_int(v) -> bool:
@@ -159,6 +166,8 @@ def check_value(path: str, key: Key, v, error=ConfigError) -> None:
         ok = _is_list(v) and all(isinstance(x, str) for x in v)
     elif key.kind == DICTS:
         ok = _is_list(v) and all(isinstance(x, Mapping) for x in v)
+    elif key.kind == MAPPING:  # its keys are checked by the code that reads them
+        ok = isinstance(v, Mapping)
     elif key.kind == BOX:
         ok = (
             _is_list(v)
@@ -239,9 +248,11 @@ FLOWS = {
     "grid": {"path": Str(null=True)},
     "abc": {k: Float() for k in ("A", "B", "C", "eps", "omega")} | {"bounds": Key(BOX, null=True)},
     "uniform": {"velocity": Key(FLOATS, size=3), "bounds": Key(BOX, null=True)},
-    "zoo": {"name": Str(required=True), "bounds": Key(BOX, null=True)},  # params: the flow class's keywords
-    "validation": {"name": Str(required=True), "bounds": Key(BOX, null=True)},  # the same for validation flows
-    "family": {"bounds": Key(BOX, null=True)},  # members: checked by their constructors (flows/families.py)
+    # params: the flow class's keywords, checked by the class
+    "zoo": {"name": Str(required=True), "params": Keywords(null=True), "bounds": Key(BOX, null=True)},
+    "validation": {"name": Str(required=True), "params": Keywords(null=True), "bounds": Key(BOX, null=True)},
+    # members: each a family's type and keywords, checked by its constructor (flows/families.py)
+    "family": {"members": Keywords(null=True), "bounds": Key(BOX, null=True)},
     "vortex_street": {
         "period": Float(gt=0),
         "advection": Float(gt=0),
@@ -411,16 +422,16 @@ EVALUATE = RUN | {
 # ----------------------------------------------------------------------------- checks per group
 def check_flow(cfg: Mapping, prefix: str = "flow") -> None:
     check_value(f"{prefix}.type", Str(choices=FLOWS), cfg.get("type") if isinstance(cfg, Mapping) else None)
-    check_group(cfg, FLOW_COMMON | FLOWS[cfg["type"]], prefix)
+    check_group(cfg, FLOW_COMMON | FLOWS[cfg["type"]], prefix, closed=True)
 
 
 def check_task(cfg: Mapping, prefix: str = "task") -> None:
     check_value(f"{prefix}.type", Str(choices=TASKS), cfg.get("type") if isinstance(cfg, Mapping) else None)
-    check_group(cfg, {"type": Str(), "in_pi": Bool()} | TASKS[cfg["type"]], prefix)
+    check_group(cfg, {"type": Str(), "in_pi": Bool()} | TASKS[cfg["type"]], prefix, closed=True)
 
 
 def check_env(cfg: Mapping, prefix: str = "env") -> None:
-    check_group(cfg, ENV, prefix)
+    check_group(cfg, ENV, prefix, closed=True)
 
 
 def check_obs(cfg: Mapping, prefix: str = "obs") -> None:

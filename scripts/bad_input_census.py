@@ -138,10 +138,11 @@ def make_files(tmp: Path) -> dict:
     del payload["policy"]
     torch.save(payload, tmp / "nopolicy.pt")
     f["nopolicy"] = tmp / "nopolicy.pt"
-    # hand-edited checkpoints: a config without obs_dim, weights without the normaliser's mean
+    # hand-edited checkpoints: a config without obs_dim, weights without the normaliser's mean or infinite ones
     for name, edit in (
         ("noobsdim", lambda p: p["config"].pop("obs_dim")),
         ("noweight", lambda p: p["state_dict"].pop("normalizer.mean")),
+        ("nonfinite", lambda p: p["state_dict"]["normalizer.mean"].fill_(float("inf"))),
     ):
         payload = torch.load(f["small"], weights_only=True)
         edit(payload["policy"])

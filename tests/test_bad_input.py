@@ -170,6 +170,22 @@ CASES = [
     ("entropy_nan", train_case("algo.entropy_coeff=nan"), "algo.entropy_coeff must be >= 0, a finite number; got nan"),
     ("misalign_nan", train_case("env.misalignment_deg=nan"), "env.misalignment_deg must be a finite number; got nan"),
     ("grad_clip_nan", dagger_case("algo.grad_clip=nan"), "algo.grad_clip must be >= 0, a finite number; got nan"),
+    # a key no group has (Hydra's + adds any key)
+    (
+        "env_key_unknown",
+        train_case("+env.sensor_nois.flow=0.1"),
+        "env has an unknown key 'sensor_nois'; keys: ['num_envs', 'dt', 'time_limit', 'u_max', 'swim_speed_scale', 'misalignment_deg', 'random_flow_phase', 'flow_strength', 'flow_strength_full', 'sensor_noise', 'sensor_bias', 'reward']",
+    ),
+    (
+        "flow_key_unknown",
+        train_case("+flow.rotate=30"),
+        "flow has an unknown key 'rotate'; keys: ['type', 'speed_scale', 'periodic_axes', 'rotate_deg', 'rotate_center', 'velocity', 'bounds']",
+    ),
+    (
+        "task_key_unknown",
+        train_case("+task.regions_share=0.5"),
+        "task has an unknown key 'regions_share'; keys: ['type', 'in_pi', 'start', 'target']",
+    ),
     # zero, negative, infinite
     ("num_envs_zero", train_case("env.num_envs=0"), "env.num_envs must be >= 1, an integer; got 0"),
     ("time_limit_inf", train_case("env.time_limit=inf"), "env.time_limit must be > 0, a finite number; got inf"),
@@ -275,6 +291,21 @@ CASES = [
         "{noweight}: policy.state_dict lacks ['normalizer.mean'] for its policy.config; the file is corrupt or was edited; use the run's last.pt or best.pt, or a file written by flownav",
     ),
     (
+        "nonfinite_weights",
+        evaluate_case("checkpoint={nonfinite}"),
+        "{nonfinite} has NaN or infinity in policy.state_dict.normalizer.mean; use a checkpoint written by flownav (it refuses to save such weights)",
+    ),
+    (
+        "nonfinite_teacher",
+        dagger_case("teacher_checkpoint={nonfinite}"),
+        "{nonfinite} has NaN or infinity in policy.state_dict.normalizer.mean; use a checkpoint written by flownav (it refuses to save such weights)",
+    ),
+    (
+        "nonfinite_export",
+        export_case("checkpoint={nonfinite}"),
+        "{nonfinite} has NaN or infinity in policy.state_dict.normalizer.mean; use a checkpoint written by flownav (it refuses to save such weights)",
+    ),
+    (
         "not_a_checkpoint",
         evaluate_case("checkpoint={garbage}"),
         "cannot read checkpoint {garbage}: it is truncated, corrupt or not a torch file (nothing a weights-only load can read); use a checkpoint written by flownav (a run's checkpoints/last.pt or best.pt)",
@@ -296,6 +327,11 @@ CASES = [
         EVIL.replace("{evil}", "{evil_cfd}/state.pt"),
     ),
     ("malicious_export", export_case("checkpoint={evil}"), EVIL),
+    (
+        "export_to_shipped",
+        export_case("checkpoint=checkpoints/student.pt", "out=checkpoints/student.onnx"),
+        "out=checkpoints/student.onnx is in a shipped place (checkpoints/, results/, data/ or REPORT.md); write the export elsewhere, e.g. the default exports/",
+    ),
     (
         "export_format",
         export_case("checkpoint=checkpoints/student.pt", "format=pdf"),

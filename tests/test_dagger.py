@@ -183,6 +183,29 @@ def test_resume_continues_exactly(teacher_ckpt, tmp_path):
     assert all(torch.equal(pa[k], pb[k]) for k in pa)
 
 
+def test_a_resume_with_another_teacher_is_refused(teacher_ckpt, tmp_path):
+    """Every label of a run's aggregated data comes from its one teacher: a resume that names another file (same view,
+    other weights) is refused; the same teacher moved elsewhere resumes."""
+    import shutil
+
+    import train
+
+    quick = ["algo.updates_per_iteration=2", "algo.steps_per_iteration=5", "algo.final_eval_episodes=0"]
+    train.run(make_cfg(teacher_ckpt, *quick, "algo.iterations=1"), tmp_path / "run")
+    other = tmp_path / "other.pt"
+    payload = load_checkpoint(teacher_ckpt)
+    policy, _ = load_policy(teacher_ckpt)
+    with torch.no_grad():
+        policy.net[0].bias.add_(0.1)
+    save_policy_checkpoint(other, policy, payload["obs"], "teacher")
+    resume = [*quick, "algo.iterations=2", f"resume={tmp_path / 'run'}"]
+    with pytest.raises(ConfigError, match=rf"^resume=.*: teacher_checkpoint={other} is not the run's \(it was "):
+        train.run(make_cfg(other, *resume), tmp_path / "x")
+    moved = shutil.copy(teacher_ckpt, tmp_path / "moved.pt")
+    train.run(make_cfg(moved, *resume), tmp_path / "y")
+    assert load_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt")["train_state"]["iteration"] == 2
+
+
 def test_teacher_of_the_wrong_view_is_refused(tmp_path):
     import train
     from flownav.agents import DeterministicPolicy

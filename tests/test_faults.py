@@ -190,12 +190,12 @@ def test_a_non_finite_checkpoint_is_never_written(tmp_path):
     with pytest.raises(NonFiniteError, match=r"refusing to write .*x\.pt: policy\.state_dict\.net\.0\.weight"):
         save_policy_checkpoint(tmp_path / "x.pt", policy, "geo", "teacher")
     assert not any(tmp_path.iterdir())
-    # A non-finite file made some other way is never shipped (copied to checkpoints/) either.
+    # A non-finite file made some other way is never read: not shipped (copied to checkpoints/), evaluated or taught.
     from flownav.checkpoint import FORMAT, ship_checkpoint
 
     payload = {"format": FORMAT, "obs": "geo", "role": "teacher", "meta": {}, "train_state": {"frames": 1}}
     torch.save(payload | {"policy": {"config": policy.config, "state_dict": policy.state_dict()}}, tmp_path / "nan.pt")
-    with pytest.raises(NonFiniteError, match=r"refusing to write .*shipped\.pt: policy\.state_dict\.net\.0\.weight"):
+    with pytest.raises(NonFiniteError, match=r"nan\.pt has NaN or infinity in policy\.state_dict\.net\.0\.weight;"):
         ship_checkpoint(tmp_path / "nan.pt", tmp_path / "shipped.pt")
     assert not (tmp_path / "shipped.pt").exists()
 

@@ -4,6 +4,7 @@ seed among those that pass, refuses when none does, and measures each check on t
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 import torch
@@ -184,3 +185,24 @@ def test_an_override_of_a_key_changes_only_that_key_of_the_runs_own_group():
     assert env(["~env.sensor_noise"]) == {k: v for k, v in run_env.items() if k != "sensor_noise"}
     older = run_cfg | {"env": {k: v for k, v in run_env.items() if k != "sensor_bias"}}
     assert env(["env.sensor_bias.flow=0.1"], older)["sensor_bias"] == defaults["sensor_bias"] | {"flow": 0.1}
+
+
+def test_a_key_override_needs_only_the_runs_own_group_to_have_it():
+    """``--override task.full_speed_share=0.5`` changes a family-trained run's task although train.py's default task
+    (the paper's regions) has no such key; a key no group has is refused with one line naming it."""
+    from omegaconf import OmegaConf
+
+    from flownav import schema
+    from flownav.builders import compose_config
+    from flownav.errors import ConfigError
+    from flownav.evaluation.selection import training_spec
+
+    run_cfg = OmegaConf.to_container(compose_config(["+experiment=generalist_student_noisy"]), resolve=True)
+    payload = {"meta": {"config": run_cfg}}
+    assert run_cfg["task"]["full_speed_share"] != 0.5
+    assert training_spec(payload, 10, ["task.full_speed_share=0.5"]).task.full_speed_share == 0.5
+    with pytest.raises(ConfigError, match=r"^env has an unknown key 'sensor_nois'; keys: \['num_envs'"):
+        schema.check_env(training_spec(payload, 10, ["env.sensor_nois.flow=0.1"]).env_cfg)
+    with pytest.raises(ConfigError, match=r"^--override flow=cylinder flow.rotate_deg=30: Could not override"):
+        training_spec(payload, 10, ["flow=cylinder", "flow.rotate_deg=30"])  # a key the chosen config lacks: +
+    assert training_spec(payload, 10, ["flow=cylinder", "+flow.rotate_deg=30"]).flow.angle == pytest.approx(math.pi / 6)

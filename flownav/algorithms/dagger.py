@@ -100,6 +100,19 @@ def check_config(cfg) -> None:
         raise ConfigError(f"obs.view (the student's view) is {cfg.obs.view!r}; choose one of {STUDENT_VIEWS}")
 
 
+def require_same_teachers(resume, saved: dict, teachers: dict) -> None:
+    """Refuse a resume whose teacher or scene experts are other files than the run's (by content: a moved file
+    is the same teacher), so that its aggregated labels all come from one teacher."""
+    for key in [k for k in teachers if k.endswith("_sha256")]:
+        if key in saved and saved[key] != teachers[key]:
+            name = key.removesuffix("_sha256")
+            name = name if name in teachers else f"{name}_checkpoint"  # teacher_sha256 goes with teacher_checkpoint
+            raise ConfigError(
+                f"resume={resume}: {name}={teachers[name]} is not the run's (it was {saved.get(name)}, sha256 "
+                f"{saved[key]}; this file's {teachers[key]}): resume with the run's own {name}"
+            )
+
+
 def beta_at(a, iteration: int) -> float:
     return float(a.beta.initial) * float(a.beta.decay) ** iteration
 
@@ -223,6 +236,7 @@ def train(cfg, run_dir) -> dict:
     iteration, frames, wall_offset, history = 0, 0, 0.0, []
     if cfg.get("resume"):
         _, payload = load_resume_checkpoint(cfg.resume, expect_obs=student_view, needs=RESUME_NEEDS)
+        require_same_teachers(cfg.resume, payload.get("meta") or {}, teacher_meta)
         st = checkpoints.restore(payload)
         iteration, frames, wall_offset = int(st["iteration"]), int(st["frames"]), float(st["wall_time"])
         refill_buffer(buffer, st["buffer"], frames)

@@ -28,48 +28,59 @@ import sys
 import torch
 
 from flownav.atomic import atomic_write_text
+from flownav.errors import ConfigError
 from flownav.evaluation.protocol import EVAL_SEED, EvalSpec, evaluate
 from flownav.provenance import provenance
 
 EPISODES = 10_000  # held-out episodes per checkpoint; shipping needs at least these
 PROG = "python -m flownav.evaluation.selection"
+EVAL_GROUPS = ("flow", "task", "env")  # what an evaluation reads of a training run's config
 
 
 def training_spec(payload: dict, episodes: int, overrides=(), chunk_size: int = 10_000, seed: int = EVAL_SEED):
     """The :class:`EvalSpec` of a checkpoint's training flow, task and env. ``overrides`` are Hydra overrides of
-    train.py's config: a group's choice (``env=abc_periodic``) replaces the run's group with that config, a key
-    (``env.sensor_bias.flow=0.1``) changes that key of the run's own group and keeps the rest of it."""
+    train.py's config: a group's choice (``env=abc_periodic``) replaces the run's group with that config (keys of
+    that group then change the chosen config), a key (``env.sensor_bias.flow=0.1``) changes that key of the run's
+    own group and keeps the rest of it (``~key`` deletes it); the group's schema checks the result."""
     from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
     from omegaconf import OmegaConf, open_dict
 
     from flownav.builders import build_flow, build_task, compose_config
 
     train_cfg = payload.get("meta", {}).get("config", {})
-    cfg = compose_config(list(overrides))
-    parsed = OverridesParser.create().parse_overrides(list(overrides))
+    try:
+        parsed = OverridesParser.create().parse_overrides(list(overrides))
+        chosen = {o.key_or_group for o in parsed if o.key_or_group in EVAL_GROUPS}
+        own = {g: [o for o in parsed if o.key_or_group.startswith(f"{g}.")] for g in EVAL_GROUPS}
+        own = {g: keys for g, keys in own.items() if g in train_cfg and g not in chosen}
+        on_own = {id(o) for keys in own.values() for o in keys}
+        cfg = compose_config([o.input_line for o in parsed if id(o) not in on_own])
+    except HydraException as e:  # Hydra's message spans lines
+        raise ConfigError(f"--override {' '.join(str(o) for o in overrides)}: {' '.join(str(e).split())}") from e
     with open_dict(cfg):
-        for group in ("flow", "task", "env"):
-            if group in train_cfg and not any(o.key_or_group == group for o in parsed):
-                keys = [o for o in parsed if o.key_or_group.startswith(f"{group}.")]
-                cfg[group] = _with_overridden_keys(OmegaConf.create(train_cfg[group]), cfg[group], keys, group)
+        for group, keys in own.items():
+            cfg[group] = _with_overridden_keys(OmegaConf.create(train_cfg[group]), cfg[group], keys, group)
     flow = build_flow(cfg.flow)
     return EvalSpec(flow, build_task(cfg.task, flow), cfg.env, episodes, seed=seed, chunk_size=chunk_size)
 
 
-def _with_overridden_keys(own, composed, overrides, group: str):
-    """The run's ``own`` group with each overridden key set to its ``composed`` value (or deleted by ``~``)."""
+def _with_overridden_keys(own, defaults, overrides, group: str):
+    """The run's ``own`` group with each overridden key set (or deleted by ``~``); a parent the run holds as null
+    or lacks (an older run) comes first from ``defaults``, train.py's default of that group."""
     from omegaconf import DictConfig, OmegaConf
 
     for o in overrides:
         parts = o.key_or_group[len(group) + 1 :].split(".")
-        for depth in range(1, len(parts)):  # a parent the run's group holds as null (an older run) comes whole
+        for depth in range(1, len(parts)):
             if not isinstance(OmegaConf.select(own, ".".join(parts[:depth])), DictConfig):
-                OmegaConf.update(own, ".".join(parts[:depth]), OmegaConf.select(composed, ".".join(parts[:depth])))
+                path = ".".join(parts[:depth])
+                OmegaConf.update(own, path, OmegaConf.select(defaults, path) or {}, merge=False)
         parent = OmegaConf.select(own, ".".join(parts[:-1])) if len(parts) > 1 else own
         if o.is_delete():
             parent.pop(parts[-1], None)
         else:
-            parent[parts[-1]] = OmegaConf.select(composed, ".".join(parts))
+            parent[parts[-1]] = o.value()
     return own
 
 
@@ -122,7 +133,6 @@ def _mean_std(xs):
 def select(args) -> dict:
     """Evaluate ``args.checkpoints``, write ``args.out``, and with ``args.ship`` copy the best one there."""
     from flownav.checkpoint import load_checkpoint, ship_checkpoint
-    from flownav.errors import ConfigError
     from flownav.shipping import failed_requirements, is_shipped, require_shippable
 
     if args.ship or is_shipped(args.out):  # refused before the (long) evaluation
