@@ -176,7 +176,7 @@ def run_paper(cfg: DictConfig, log=print) -> dict:
     # Before the run: its own outputs (figures, results) are tracked files and would mark the commit dirty.
     prov = provenance(cmd)
     t0 = time.time()
-    results = run_suite(cfg, log=log)
+    results = run_suite(cfg, log=log, provenance=prov)
     results_path = resolve(str(cfg.results))
     data = merge_results(results_path, results, prov, log=log)
     report_path = resolve(str(cfg.report))

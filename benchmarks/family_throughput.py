@@ -5,11 +5,13 @@ Run: ``python benchmarks/family_throughput.py [--threads 1] [--batch 4096] [--se
 ``benchmarks/results/family_throughput.json``. ``python benchmarks/family_throughput.py --cost
 teacher=<run dir> --cost student=<run dir> ...`` writes the training runs' wall times (their
 ``final_metrics.json``, and each one's against the first's) to ``benchmarks/results/generalist_cost.json``
-(``--cost-file NAME``: NAME.json) instead.
+(``--cost-file NAME``: NAME.json) instead; ``--pipeline generalist_student`` writes what training that student
+from nothing takes, every network of its teacher included, from the shipped checkpoints' recorded wall times.
 
 Every case steps ``NavigationEnv.step_and_maybe_reset`` with random actions (resets included) on the flow
 config ``conf/flow/<name>.yaml`` and the task the generalist trains on (``task=family``; the wake alone: the
-paper's regions; the periodic family: the ABC task it is used with; the students' families: their experiment's),
+paper's regions; the periodic family: the ABC task it is used with; the students' and the away expert's families:
+their experiment's),
 with the teacher's view (``geo_sincos``), with the generalist teacher's views (``geo_priv`` + ``geo_priv_critic``:
 4 look-ups per step instead of 1), with the wider ``geo_priv_around`` (12 more points per step) and with what a
 generalist student's DAgger env computes (``ego_mem_grad`` + ``geo_priv_scene``: 3 more points for the body-axis
@@ -40,13 +42,15 @@ FLOWS = (
     "family_wake",
     "family_vortex_street",
     "family_mix",
-    "family_mix_wake",
+    "family_mix_turned",
+    "family_wake_posed",
     "family_fourier_periodic",
 )
-# The task each flow is stepped with: the generalist's family task unless the flow has its own; the students'
-# families (family_mix_wake) with their experiment's task (the paper's regions in the posed wake, other starts).
+# The task each flow is stepped with: the generalist's family task unless the flow has its own; the flows an
+# experiment trains on with that experiment's task (the students' paper's regions in the posed wake and other starts;
+# the away expert's starts anywhere in the posed wake).
 TASKS = {"cylinder": "regions", "family_fourier_periodic": "abc"}
-EXPERIMENTS = {"family_mix_wake": "generalist_student"}
+EXPERIMENTS = {"family_mix_turned": "generalist_student", "family_wake_posed": "generalist_away_expert"}
 VIEWS = {
     "teacher view (geo_sincos)": ("geo_sincos",),
     "privileged views (geo_priv + critic)": ("geo_priv", "geo_priv_critic"),
@@ -59,7 +63,7 @@ VIEWS = {
 
 def make_stepper(flow_name: str, views, batch: int):
     if flow_name in EXPERIMENTS:
-        cfg = compose_config([f"+experiment={EXPERIMENTS[flow_name]}", "env=default"], app="train")
+        cfg = compose_config([f"+experiment={EXPERIMENTS[flow_name]}", f"flow={flow_name}", "env=default"])
     else:
         cfg = compose_config(
             [f"flow={flow_name}", f"task={TASKS.get(flow_name, 'family')}", "env=default"], app="train"
@@ -89,6 +93,44 @@ def run_cost(spec: str) -> dict:
     return row
 
 
+def pipeline_cost(experiment: str) -> dict:
+    """What training a shipped student from nothing takes: its own run and the run of every network its teacher is
+    made of (``teacher_checkpoint`` and the scene experts ``algo.scene_*expert`` of ``conf/experiment/<name>.yaml``),
+    one run each, as each shipped checkpoint recorded it (wall time, threads). Scripted experts cost nothing."""
+    from flownav.builders import compose_config
+    from flownav.checkpoint import load_checkpoint
+    from flownav.paths import resolve
+
+    cfg = compose_config([f"+experiment={experiment}"])
+    parts = {"teacher_checkpoint": cfg.teacher_checkpoint}
+    parts |= {k: v for k, v in cfg.algo.items() if k.startswith("scene_") and k.endswith("expert") and v}
+    parts["student"] = cfg.output_checkpoint
+    rows = []
+    for role, path in parts.items():
+        payload = load_checkpoint(resolve(str(path)))
+        meta, state = payload.get("meta") or {}, payload.get("train_state") or {}
+        rows.append(
+            {
+                "role": role,
+                "checkpoint": str(path),
+                "experiment": (meta.get("config") or {}).get("name"),
+                "wall_time_min": state["wall_time"] / 60,
+                "threads": (meta.get("config") or {}).get("threads"),
+                "frames": meta.get("frames"),
+            }
+        )
+    teachers = sum(r["wall_time_min"] for r in rows if r["role"] != "student")
+    return {
+        "what": f"training cost of {experiment} from nothing: every network of its teacher and its own run, one run "
+        "each, as the shipped checkpoints recorded it (train_state.wall_time; each ran on this machine beside what "
+        "else ran then)",
+        "results": rows,
+        "teacher_networks_min": teachers,
+        "total_min": teachers + rows[-1]["wall_time_min"],
+        "targets_min": {"teacher": 60, "student": 20},
+    }
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--threads", type=int, default=1)
@@ -98,7 +140,15 @@ def main():
     parser.add_argument("--flows", nargs="+", default=list(FLOWS))
     parser.add_argument("--cost", action="append", default=[], help="name=<run dir> of a finished training run")
     parser.add_argument("--cost-file", default="generalist_cost", help="benchmarks/results/<this>.json for --cost")
+    parser.add_argument("--pipeline", help="an experiment (generalist_student): its whole training cost, from the "
+                        "shipped checkpoints, to benchmarks/results/<experiment>_pipeline_cost.json")  # fmt: skip
     args = parser.parse_args()
+    if args.pipeline:
+        payload = pipeline_cost(args.pipeline)
+        payload |= {"command": "python benchmarks/family_throughput.py " + " ".join(sys.argv[1:]), "machine": machine()}
+        payload["headline"] = {k: payload[k] for k in ("teacher_networks_min", "total_min")}
+        write_result(f"{args.pipeline}_pipeline_cost", payload)
+        return
     if args.cost:
         payload = {
             "what": "wall time of the generalist's training runs (final_metrics.json of each run directory)",

@@ -66,3 +66,19 @@ def test_eval_benchmark_times_the_protocols_episodes():
     summary = evaluate(policy, "geo", spec).summary
     assert timed["episodes"] == 300 and timed["success_rate"] == summary["success_rate"]
     assert 0 < summary["success_rate"] < 1  # a stream that beats some swimmers: the episodes are told apart
+
+
+def test_the_pipeline_cost_counts_every_network_the_students_teacher_is_made_of():
+    """The generalist student's cost from nothing: its generalist teacher, the paper's teacher and the four trained
+    scene experts its config names, then its own run, each with the wall time its shipped checkpoint recorded."""
+    from flownav.checkpoint import load_checkpoint
+    from flownav.paths import CHECKPOINT_DIR
+
+    cost = _load("family_throughput").pipeline_cost("generalist_student")
+    roles = [r["role"] for r in cost["results"]]
+    assert roles == ["teacher_checkpoint", "scene_expert", "scene_reverse_expert", "scene_away_expert",
+                     "scene_wake_expert", "scene_wake_regions_expert", "student"]  # fmt: skip
+    away = next(r for r in cost["results"] if r["role"] == "scene_away_expert")
+    wall = load_checkpoint(CHECKPOINT_DIR / "generalist_away_expert.pt")["train_state"]["wall_time"]
+    assert away["wall_time_min"] == wall / 60
+    assert cost["total_min"] == sum(r["wall_time_min"] for r in cost["results"])

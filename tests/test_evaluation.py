@@ -351,7 +351,8 @@ def test_missing_checkpoints_are_skipped_with_the_command(tiny_world, tmp_path):
     )
     r = evaluate.run(cfg, log=lambda *_: None)["training"]
     expected = {"student", "baseline", "student_up", "student_mem", "teacher_robust", "student_robust"}
-    expected |= {"student_mem_robust", "generalist_student", "generalist_student_noisy"}  # the last two: shipped files
+    expected |= {"student_mem_robust", "generalist_teacher", "generalist_student", "generalist_student_noisy"}
+    # (the generalists: their shipped files)
     expected |= {"head_to_target", "passive"}
     assert set(r["results"]) == expected  # no teacher file
     assert any("python train.py +experiment=teacher" in m for m in r["missing"])

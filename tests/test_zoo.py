@@ -1,6 +1,7 @@
 """The generalisation zoo and the validation set: incompressible held-out flows, none a member of a training family,
 the validation set's none of the zoo's kinds, and the suites."""
 
+import json
 import math
 
 import pytest
@@ -9,7 +10,7 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from flownav.builders import build_flow, build_task, compose_config
-from flownav.evaluation.experiments import Suite
+from flownav.evaluation.experiments import Suite, run_suite
 from flownav.evaluation.kinds.zoo import family_member
 from flownav.flows.validation import J1_ZERO, VALIDATION, BickleyJet, HillVortex, LambDipole
 from flownav.flows.zoo import ZOO, BeltramiShell
@@ -187,14 +188,16 @@ def test_the_suite_runs_tiny_and_skips_a_missing_checkpoint(tmp_path):
     cfg = compose_eval(*overrides)
     keep = {k: v for k, v in cfg.suite.generalization.cases.items() if k in ("still_water", "taylor_green")}
     cfg.suite.generalization.cases = keep
-    r = Suite(cfg, log=lambda *_: None).run("generalization", cfg.suite.generalization)
+    r = run_suite(cfg, log=lambda *_: None, provenance={"commit": "abc123"})["generalization"]
     assert any("generalist_student" in m and "missing checkpoint" in m for m in r["missing"])
     assert set(r["results"]) == {"still_water", "taylor_green"}
     assert r["results"]["taylor_green"]["oracle"]["episodes"] == 3
     assert r["results"]["still_water"]["head_to_target"]["success_rate"] == 1.0
     row = r["summary"]["held_out"]["passive"]
     assert row["cases"] == 1 and row["compared_to_head_to_target"] == 1
-    assert (tmp_path / "generalization.json").is_file()
+    written = json.loads((tmp_path / "generalization.json").read_text())
+    assert written["provenance"] == {"commit": "abc123"}  # where its numbers come from, as in results/paper.json
+    assert written["results"] == json.loads(json.dumps(r["results"]))
 
 
 def test_a_narrowed_entry_keeps_its_caps_and_runs(tmp_path):

@@ -50,6 +50,7 @@ class Suite:
         # evaluate.py sets figures_dir (the run directory unless shipping); a library caller's default is ./figures
         self.figures_dir = Path(figures_dir or cfg.get("figures_dir") or "figures")
         self.log = log
+        self.provenance: dict = {}  # run_suite's: written into an entry's own json file
         self._flows: dict[str, object] = {}
         self._policies: dict[str, tuple] = {}
 
@@ -203,9 +204,11 @@ class Suite:
         return out
 
 
-def run_suite(cfg: DictConfig, log=print) -> dict:
-    """Run every entry of ``cfg.suite`` (in order); returns ``{name: result}``."""
+def run_suite(cfg: DictConfig, log=print, provenance: dict | None = None) -> dict:
+    """Run every entry of ``cfg.suite`` (in order); returns ``{name: result}``. ``provenance`` (the run's commit,
+    time and command) goes into every file an entry writes of its own (``json:``), as results/paper.json has it."""
     suite = Suite(cfg, log=log)
+    suite.provenance = dict(provenance or {})
     results = {}
     for name, spec in cfg.suite.items():
         if spec is None or not spec.get("enabled", True):

@@ -32,5 +32,6 @@ def run(suite, name, spec, out) -> dict:
         raise Missing(f"no DAgger runs found ({list(spec.run_globs)}): run `{spec.command}`")
     fig, stats = plot_loss_curves(runs, suite.figures_dir / f"{name}.png", key=key)
     if spec.get("json"):
-        atomic_write_text(resolve(str(spec.json)), json.dumps(stats | {"files": sorted(runs)}, indent=1))
+        own = stats | {"files": sorted(runs), "provenance": suite.provenance}
+        atomic_write_text(resolve(str(spec.json)), json.dumps(own, indent=1))
     return {"runs": sorted(runs), "curve": stats, "figures": [str(fig)]}

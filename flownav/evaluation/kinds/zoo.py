@@ -140,7 +140,8 @@ def run_zoo(suite, name: str, spec, out: dict) -> dict:
     summary = summarise_policies(results, flows, margin)
     res = {"cases": flows, "results": results, "summary": summary, "margin": margin, "case_seconds": cases}
     if spec.get("json"):
-        atomic_write_text(resolve(str(spec.json)), json.dumps(res | {"title": out["title"]}, indent=1))
+        own = res | {"title": out["title"], "provenance": suite.provenance}
+        atomic_write_text(resolve(str(spec.json)), json.dumps(own, indent=1))
     return res
 
 
