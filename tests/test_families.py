@@ -431,3 +431,31 @@ def test_a_periodic_evaluation_figure_of_a_family_draws_the_recorded_paths():
     fig = eval_trajectories_figure(ev.episodes.trajectories, flow)
     paths = [line for line in fig.axes[0].lines if len(line.get_xdata()) > 1]
     assert len(paths) == 3 and len(fig.axes) == 1  # one path per recorded episode, no colorbar
+
+
+def test_turned_scaled_shifted_summed_and_mixed_members_stay_divergence_free():
+    """What the families build from divergence-free flows (a turn about z, a strength, a time shift, a uniform
+    background current; sums; mixtures) is divergence-free, swimmer by swimmer: each is linear in the flows, and a
+    turn about z of a divergence-free field is one."""
+    A, B, C = 1.0, 0.7, 0.4
+
+    def abc(p, t):  # the ABC flow made time-dependent: div u = 0 at every time
+        w = 1 + 0.3 * torch.sin(t)
+        x, y, z = p.unbind(-1)
+        return torch.stack((A * torch.sin(z) + C * torch.cos(y), B * torch.sin(x) + A * torch.cos(z) * w,
+                            C * torch.sin(y) + B * torch.cos(x)), -1)  # fmt: skip
+
+    base = FunctionFlow(abc, WAKE_BOUNDS, 2.0, period=2 * math.pi)
+    turned = TransformedFamily([base], angle_deg=(-180.0, 180.0), strength=(0.2, 2.0), background=(0.0, 0.5))
+    summed = SumFamily([TransformedFamily([base]), FourierFamily(modes=4), UniformFamily()], WAKE_BOUNDS)
+    mixed = MixtureFamily([summed, TransformedFamily([base])], [1.0, 1.0], WAKE_BOUNDS)
+    n = 64
+    gen = torch.Generator().manual_seed(0)
+    pos, t = torch.rand(n, 3, generator=gen) * 14 - 4, torch.rand(n, generator=gen) * 30
+    for family in (turned, summed, mixed):
+        drawn(family, n, seed=2)
+        div, u = divergence(family, pos, t)
+        assert u.abs().max() > 0.5
+        assert div.abs().max() < 1e-5, type(family).__name__  # float32: the derivatives are O(1)
+    angles = torch.atan2(turned.params["sin"], turned.params["cos"])
+    assert angles.max() - angles.min() > 3  # the members differ: turned every way
