@@ -96,7 +96,8 @@ def run_cost(spec: str) -> dict:
 def pipeline_cost(experiment: str) -> dict:
     """What training a shipped student from nothing takes: its own run and the run of every network its teacher is
     made of (``teacher_checkpoint`` and the scene experts ``algo.scene_*expert`` of ``conf/experiment/<name>.yaml``),
-    one run each, as each shipped checkpoint recorded it (wall time, threads). Scripted experts cost nothing."""
+    one run each, as each shipped checkpoint recorded it (wall time, threads; a DAgger run's before its final
+    evaluation). The routed teacher's scripted rules (``scene_currents``, ``scene_free_flows``) train nothing."""
     from flownav.builders import compose_config
     from flownav.checkpoint import load_checkpoint
     from flownav.paths import resolve

@@ -43,14 +43,21 @@ def _scale_pi(value):
     return [[float(x) * math.pi for x in corner] for corner in value]
 
 
-def _family_member(cfg: Mapping, key: str, bounds: Box, device, periodic: tuple[int, ...] = ()) -> FlowFamily:
+def _family_member(
+    cfg: Mapping, key: str, bounds: Box, device, periodic: tuple[int, ...] = (), in_sum: bool = False
+) -> FlowFamily:
     """One member of a flow family (flownav/flows/families.py): its type and its constructor's arguments;
-    ``periodic``: the family's periodic axes, on which random Fourier modes take whole periods of the box."""
+    ``periodic``: the family's periodic axes, on which random Fourier modes take whole periods of the box;
+    ``in_sum``: a part of a sum, which every swimmer of that member gets (a weight there would mean nothing)."""
+    if in_sum and "weight" in cfg:
+        raise ConfigError(f"{key}.weight: a part of a sum has no weight (every part is added); drop it")
     args = {k: v for k, v in cfg.items() if k not in ("type", "weight")}
     kind = cfg.get("type")
     if kind == "sum":
+        if extra := sorted(set(args) - {"members"}):
+            raise ConfigError(f"{key} (type: sum) has an unknown key {extra[0]!r}; a sum takes only members")
         parts = args.get("members") or {}
-        members = [_family_member(m, f"{key}.members.{n}", bounds, device, periodic) for n, m in parts.items()]
+        members = [_family_member(m, f"{key}.members.{n}", bounds, device, periodic, True) for n, m in parts.items()]
         return SumFamily(members, bounds)
     if kind == "fourier" and periodic:
         args["periodic_axes"] = periodic

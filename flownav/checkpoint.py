@@ -171,7 +171,8 @@ def load_checkpoint(path) -> dict:
             "best.pt, or a file written by save_policy_checkpoint"
         )
     require_consistent_policy(path, policy)
-    # weights with a NaN or an infinity would act, teach or export nonsense (a normaliser's is clamped, not NaN)
+    # weights holding a NaN or an infinity would act, teach or export nonsense (an infinite normaliser mean does it
+    # silently: every normalised input is clamped to its bound)
     if bad := non_finite_entries(policy["state_dict"], "policy.state_dict"):
         raise NonFiniteError(
             f"{path} has NaN or infinity in {', '.join(bad[:3])}{' ...' if len(bad) > 3 else ''}; use a checkpoint "

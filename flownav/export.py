@@ -267,7 +267,8 @@ def export_policy(checkpoint, fmt: str = "onnx", out=None) -> tuple[Path, Path]:
     policy, payload = load_policy(checkpoint)
     out = Path(out) if out else Path("exports") / f"{checkpoint.stem}{FORMATS[fmt]}"
     card_path = out.with_name(out.name + ".json")
-    if is_shipped(out) or is_shipped(card_path):  # an export is never a shipped file (flownav/shipping.py)
+    # an export is never a shipped file (flownav/shipping.py); checked where it is written, relative to here
+    if is_shipped(out.absolute()) or is_shipped(card_path.absolute()):
         raise ConfigError(
             f"out={out} is in a shipped place (checkpoints/, results/, data/ or REPORT.md); write the export "
             "elsewhere, e.g. the default exports/"

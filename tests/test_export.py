@@ -128,3 +128,19 @@ def test_every_student_view_names_each_of_its_numbers_in_order():
         inputs = observation_inputs(view)
         assert [i["index"] for i in inputs] == list(range(observation_size(view))), view
         assert len({i["name"] for i in inputs}) == len(inputs), view
+
+
+def test_an_export_into_a_shipped_place_is_refused_where_it_would_be_written(tmp_path, monkeypatch):
+    """out= is judged where the file goes, relative to the working directory: ../checkpoints/ from a folder of the
+    repository is a shipped place; checkpoints/ inside another folder is not."""
+    from flownav.errors import ConfigError
+    from flownav.export import export_policy
+    from flownav.paths import REPO_ROOT
+
+    monkeypatch.chdir(REPO_ROOT / "docs")
+    with pytest.raises(ConfigError, match=r"^out=\.\./checkpoints/new\.onnx is in a shipped place"):
+        export_policy(REPO_ROOT / "checkpoints" / "student.pt", "onnx", "../checkpoints/new.onnx")
+    assert not (REPO_ROOT / "checkpoints" / "new.onnx").exists()
+    monkeypatch.chdir(tmp_path)
+    out, card = export_policy(REPO_ROOT / "checkpoints" / "student.pt", "onnx", "checkpoints/new.onnx")
+    assert out.resolve() == (tmp_path / "checkpoints" / "new.onnx").resolve() and card.is_file()

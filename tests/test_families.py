@@ -367,6 +367,17 @@ def test_a_periodic_fourier_family_is_periodic_per_swimmer_and_divergence_free()
     assert torch.equal(free.params["phase"], lattice.params["phase"])
 
 
+def test_a_sum_member_refuses_a_key_it_would_ignore():
+    """A sum takes only its parts; a part of a sum has no weight (every part is added to every swimmer's flow)."""
+    mix = OmegaConf.to_container(OmegaConf.load("conf/flow/family_mix.yaml"))
+    part = mix["members"]["fourier_on_current"]
+    with pytest.raises(ConfigError, match=r"^flow.members.fourier_on_current \(type: sum\) has an unknown key 'foo'"):
+        build_flow(mix | {"members": {"fourier_on_current": part | {"foo": 1}}})
+    weighted = part | {"members": part["members"] | {"current": part["members"]["current"] | {"weight": 3}}}
+    with pytest.raises(ConfigError, match=r"^flow.members.fourier_on_current.members.current.weight: a part of a sum"):
+        build_flow(mix | {"members": {"fourier_on_current": weighted}})
+
+
 def test_a_periodic_family_refuses_a_member_that_is_not_periodic():
     cfg = OmegaConf.load("conf/flow/family_fourier_periodic.yaml")
     cfg.members = {"current": {"type": "uniform", "speed": [0.0, 1.0]}, "street": {"type": "vortex_street"}}

@@ -206,3 +206,11 @@ def test_a_key_override_needs_only_the_runs_own_group_to_have_it():
     with pytest.raises(ConfigError, match=r"^--override flow=cylinder flow.rotate_deg=30: Could not override"):
         training_spec(payload, 10, ["flow=cylinder", "flow.rotate_deg=30"])  # a key the chosen config lacks: +
     assert training_spec(payload, 10, ["flow=cylinder", "+flow.rotate_deg=30"]).flow.angle == pytest.approx(math.pi / 6)
+    # as Hydra: a group of keys merges into the run's, + adds a key only where there is none; errors are one line
+    noise = training_spec(payload, 10, ["env.sensor_noise={flow: 0.2}"]).env_cfg["sensor_noise"]
+    assert dict(noise) == run_cfg["env"]["sensor_noise"] | {"flow": 0.2}
+    with pytest.raises(ConfigError, match=r"^--override \+env.dt=0.5: env.dt is already set; use env.dt=\.\.\."):
+        training_spec(payload, 10, ["+env.dt=0.5"])
+    assert training_spec(payload, 10, ["++env.dt=0.5"]).env_cfg["dt"] == 0.5
+    with pytest.raises(ConfigError, match=r"^--override env.dt.x=1: "):
+        training_spec(payload, 10, ["env.dt.x=1"])

@@ -106,10 +106,12 @@ def require_same_teachers(resume, saved: dict, teachers: dict) -> None:
     for key in [k for k in teachers if k.endswith("_sha256")]:
         if key in saved and saved[key] != teachers[key]:
             name = key.removesuffix("_sha256")
-            name = name if name in teachers else f"{name}_checkpoint"  # teacher_sha256 goes with teacher_checkpoint
+            # teacher_sha256 goes with the top-level teacher_checkpoint, a scene expert's with its algo.<key>
+            setting = f"algo.{name}" if name in teachers else f"{name}_checkpoint"
+            path = teachers[name] if name in teachers else teachers[setting]
             raise ConfigError(
-                f"resume={resume}: {name}={teachers[name]} is not the run's (it was {saved.get(name)}, sha256 "
-                f"{saved[key]}; this file's {teachers[key]}): resume with the run's own {name}"
+                f"resume={resume}: {setting}={path} is not the run's (it was {saved.get(setting.removeprefix('algo.'))}"
+                f", sha256 {saved[key]}; this file's {teachers[key]}): resume with the run's own {setting}"
             )
 
 

@@ -24,6 +24,7 @@ import json
 import math
 import shlex
 import sys
+from pathlib import Path
 
 import torch
 
@@ -45,6 +46,7 @@ def training_spec(payload: dict, episodes: int, overrides=(), chunk_size: int = 
     from hydra.core.override_parser.overrides_parser import OverridesParser
     from hydra.errors import HydraException
     from omegaconf import OmegaConf, open_dict
+    from omegaconf.errors import OmegaConfBaseException
 
     from flownav.builders import build_flow, build_task, compose_config
 
@@ -60,7 +62,11 @@ def training_spec(payload: dict, episodes: int, overrides=(), chunk_size: int = 
         raise ConfigError(f"--override {' '.join(str(o) for o in overrides)}: {' '.join(str(e).split())}") from e
     with open_dict(cfg):
         for group, keys in own.items():
-            cfg[group] = _with_overridden_keys(OmegaConf.create(train_cfg[group]), cfg[group], keys, group)
+            try:
+                cfg[group] = _with_overridden_keys(OmegaConf.create(train_cfg[group]), cfg[group], keys, group)
+            except (TypeError, ValueError, OmegaConfBaseException) as e:
+                lines = " ".join(o.input_line for o in keys)
+                raise ConfigError(f"--override {lines}: {' '.join(str(e).split())}") from e
     flow = build_flow(cfg.flow)
     return EvalSpec(flow, build_task(cfg.task, flow), cfg.env, episodes, seed=seed, chunk_size=chunk_size)
 
@@ -73,14 +79,19 @@ def _with_overridden_keys(own, defaults, overrides, group: str):
     for o in overrides:
         parts = o.key_or_group[len(group) + 1 :].split(".")
         for depth in range(1, len(parts)):
-            if not isinstance(OmegaConf.select(own, ".".join(parts[:depth])), DictConfig):
-                path = ".".join(parts[:depth])
+            path = ".".join(parts[:depth])
+            node = OmegaConf.select(own, path)
+            if node is not None and not isinstance(node, DictConfig):
+                raise ValueError(f"{group}.{path} is {node!r}, not a group of keys")
+            if node is None:
                 OmegaConf.update(own, path, OmegaConf.select(defaults, path) or {}, merge=False)
         parent = OmegaConf.select(own, ".".join(parts[:-1])) if len(parts) > 1 else own
         if o.is_delete():
             parent.pop(parts[-1], None)
-        else:
-            parent[parts[-1]] = o.value()
+        elif o.is_add() and parts[-1] in parent:  # as Hydra: + adds a key, ++ adds or sets one
+            raise ValueError(f"{o.key_or_group} is already set; use {o.key_or_group}=... or ++{o.key_or_group}=...")
+        else:  # a group of keys merges into the one there, as in Hydra
+            OmegaConf.update(parent, parts[-1], o.value(), merge=True)
     return own
 
 
@@ -135,7 +146,8 @@ def select(args) -> dict:
     from flownav.checkpoint import load_checkpoint, ship_checkpoint
     from flownav.shipping import failed_requirements, is_shipped, require_shippable
 
-    if args.ship or is_shipped(args.out):  # refused before the (long) evaluation
+    shipped_out = is_shipped(Path(args.out).absolute())  # where it is written, relative to here
+    if args.ship or shipped_out:  # refused before the (long) evaluation
         if args.episodes < EPISODES:
             raise ConfigError(
                 f"--episodes {args.episodes} is below the {EPISODES} a shipped result needs; drop --ship "
@@ -160,7 +172,7 @@ def select(args) -> dict:
     if args.ship:  # the rule for every shipped policy: the best seed by held-out success of those that pass
         passing = [r for r in runs if not failed_requirements(r["requirements"])]  # their experiment's checks
         if not passing:
-            if not is_shipped(args.out):
+            if not shipped_out:
                 atomic_write_text(args.out, json.dumps(out, indent=2))
             failed = "; ".join(f"{r['checkpoint']}: {', '.join(failed_requirements(r['requirements']))}" for r in runs)
             raise ConfigError(f"shipping refused: no checkpoint passes its experiment's ship_requires ({failed})")
