@@ -126,7 +126,9 @@ def test_no_zoo_case_is_a_member_of_a_training_family_unless_it_says_so():
 def test_the_declared_training_ranges_cover_what_the_generalists_families_draw():
     """The membership test reads `training_families` from the suite config; if a family config drew beyond them,
     a zoo case could be a trained flow and still count as held out. Every member of the teacher's and the
-    students' families (their experiments' flows) lies inside a declared family."""
+    students' families (their experiments' flows) lies inside a declared family, and so does what every shipped
+    network the students learn from was trained on (its file's recorded config): labels from a network trained on a
+    zoo case would make that case a trained one."""
     declared = {
         f["name"]: f
         for f in OmegaConf.to_container(
@@ -160,6 +162,23 @@ def test_the_declared_training_ranges_cover_what_the_generalists_families_draw()
         assert flow["type"] == "family", experiment
         for name, member in flow["members"].items():
             check(member, f"{experiment}: flow.members.{name}")
+    # What every shipped network the students learn from (and they themselves) was trained on, as its file records
+    # it: the generalist networks' families, and the paper's teacher's wake as posed.
+    from flownav.checkpoint import safe_torch_load
+    from flownav.paths import CHECKPOINT_DIR
+
+    files = [CHECKPOINT_DIR / "teacher.pt", *sorted(CHECKPOINT_DIR.glob("generalist_*.pt"))]
+    assert len(files) >= 8
+    for path in files:
+        config = safe_torch_load(path)["meta"]["config"]
+        flow, env = config["flow"], config["env"]
+        if flow["type"] == "family":
+            for name, member in flow["members"].items():
+                check(member, f"{path.name}: flow.members.{name}")
+        else:
+            assert flow["type"] == "grid" and not flow.get("rotate_deg") and not env.get("misalignment_deg"), path
+            strength = [float(flow.get("speed_scale", 1.0)) * s for s in (env.get("flow_strength") or [1.0, 1.0])]
+            check({"type": "wake", "strength": strength, "angle_deg": [0.0, 0.0]}, path.name)
 
 
 def test_every_zoo_case_builds_with_starts_and_targets_8_to_12_apart():
