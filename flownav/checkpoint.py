@@ -47,12 +47,14 @@ def non_finite_entries(obj, prefix: str = "") -> list[str]:
     return [name for k, v in items for name in non_finite_entries(v, f"{prefix}.{k}" if prefix else str(k))]
 
 
+def _first_names(names: list[str]) -> str:
+    return ", ".join(names[:3]) + (" ..." if len(names) > 3 else "")
+
+
 def require_finite_payload(payload: dict, path) -> None:
     bad = non_finite_entries({"policy": payload["policy"], "train_state": payload.get("train_state") or {}})
     if bad:
-        raise NonFiniteError(
-            f"refusing to write {path}: {', '.join(bad[:3])}{' ...' if len(bad) > 3 else ''} hold NaN or infinity"
-        )
+        raise NonFiniteError(f"refusing to write {path}: {_first_names(bad)} hold NaN or infinity")
 
 
 def save_policy_checkpoint(
@@ -175,8 +177,8 @@ def load_checkpoint(path) -> dict:
     # silently: every normalised input is clamped to its bound)
     if bad := non_finite_entries(policy["state_dict"], "policy.state_dict"):
         raise NonFiniteError(
-            f"{path} has NaN or infinity in {', '.join(bad[:3])}{' ...' if len(bad) > 3 else ''}; use a checkpoint "
-            "written by flownav (it refuses to save such weights)"
+            f"{path} has NaN or infinity in {_first_names(bad)}; use a checkpoint written by flownav (it refuses to "
+            "save such weights)"
         )
     return payload
 

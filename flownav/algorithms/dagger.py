@@ -102,16 +102,15 @@ def check_config(cfg) -> None:
 
 def require_same_teachers(resume, saved: dict, teachers: dict) -> None:
     """Refuse a resume whose teacher or scene experts are other files than the run's (by content: a moved file
-    is the same teacher), so that its aggregated labels all come from one teacher."""
-    for key in [k for k in teachers if k.endswith("_sha256")]:
-        if key in saved and saved[key] != teachers[key]:
-            name = key.removesuffix("_sha256")
-            # teacher_sha256 goes with the top-level teacher_checkpoint, a scene expert's with its algo.<key>
-            setting = f"algo.{name}" if name in teachers else f"{name}_checkpoint"
-            path = teachers[name] if name in teachers else teachers[setting]
+    is the same teacher), so that its aggregated labels all come from one teacher. ``teachers``: the run's meta of
+    them, ``{setting: path, <setting without _checkpoint>_sha256: hash}``."""
+    for setting, path in teachers.items():
+        key = f"{setting.removesuffix('_checkpoint')}_sha256"
+        if key in saved and key in teachers and saved[key] != teachers[key]:
+            shown = setting if setting == "teacher_checkpoint" else f"algo.{setting}"  # as the user sets it
             raise ConfigError(
-                f"resume={resume}: {setting}={path} is not the run's (it was {saved.get(setting.removeprefix('algo.'))}"
-                f", sha256 {saved[key]}; this file's {teachers[key]}): resume with the run's own {setting}"
+                f"resume={resume}: {shown}={path} is not the run's (it was {saved.get(setting)}, sha256 {saved[key]}; "
+                f"this file's {teachers[key]}): resume with the run's own {shown}"
             )
 
 

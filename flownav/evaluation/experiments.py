@@ -40,7 +40,7 @@ def plain(node):
 class Suite:
     """Runs suite entries, caching flows and policies across them."""
 
-    def __init__(self, cfg: DictConfig, figures_dir: Path | None = None, log=print):
+    def __init__(self, cfg: DictConfig, figures_dir: Path | None = None, log=print, provenance: dict | None = None):
         self.cfg = cfg
         self.device = str(cfg.get("device", "cpu"))
         self.seed = int(cfg.get("seed", EVAL_SEED))
@@ -50,7 +50,7 @@ class Suite:
         # evaluate.py sets figures_dir (the run directory unless shipping); a library caller's default is ./figures
         self.figures_dir = Path(figures_dir or cfg.get("figures_dir") or "figures")
         self.log = log
-        self.provenance: dict = {}  # run_suite's: written into an entry's own json file
+        self.provenance = dict(provenance or {})  # the run's commit, time, command: into an entry's own json file
         self._flows: dict[str, object] = {}
         self._policies: dict[str, tuple] = {}
 
@@ -207,8 +207,7 @@ class Suite:
 def run_suite(cfg: DictConfig, log=print, provenance: dict | None = None) -> dict:
     """Run every entry of ``cfg.suite`` (in order); returns ``{name: result}``. ``provenance`` (the run's commit,
     time and command) goes into every file an entry writes of its own (``json:``), as results/paper.json has it."""
-    suite = Suite(cfg, log=log)
-    suite.provenance = dict(provenance or {})
+    suite = Suite(cfg, log=log, provenance=provenance)
     results = {}
     for name, spec in cfg.suite.items():
         if spec is None or not spec.get("enabled", True):

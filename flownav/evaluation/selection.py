@@ -53,20 +53,15 @@ def training_spec(payload: dict, episodes: int, overrides=(), chunk_size: int = 
     train_cfg = payload.get("meta", {}).get("config", {})
     try:
         parsed = OverridesParser.create().parse_overrides(list(overrides))
-        chosen = {o.key_or_group for o in parsed if o.key_or_group in EVAL_GROUPS}
-        own = {g: [o for o in parsed if o.key_or_group.startswith(f"{g}.")] for g in EVAL_GROUPS}
-        own = {g: keys for g, keys in own.items() if g in train_cfg and g not in chosen}
-        on_own = {id(o) for keys in own.values() for o in keys}
-        cfg = compose_config([o.input_line for o in parsed if id(o) not in on_own])
-    except HydraException as e:  # Hydra's message spans lines
-        raise ConfigError(f"--override {' '.join(str(o) for o in overrides)}: {' '.join(str(e).split())}") from e
-    with open_dict(cfg):
-        for group, keys in own.items():
-            try:
+        own = [g for g in EVAL_GROUPS if g in train_cfg and all(o.key_or_group != g for o in parsed)]
+        on_own = [o for o in parsed if o.key_or_group.split(".")[0] in own]  # a key of the run's own group
+        cfg = compose_config([o.input_line for o in parsed if o not in on_own])
+        with open_dict(cfg):
+            for group in own:
+                keys = [o for o in on_own if o.key_or_group.startswith(f"{group}.")]
                 cfg[group] = _with_overridden_keys(OmegaConf.create(train_cfg[group]), cfg[group], keys, group)
-            except (TypeError, ValueError, OmegaConfBaseException) as e:
-                lines = " ".join(o.input_line for o in keys)
-                raise ConfigError(f"--override {lines}: {' '.join(str(e).split())}") from e
+    except (HydraException, OmegaConfBaseException, TypeError, ValueError) as e:  # Hydra's messages span lines
+        raise ConfigError(f"--override {' '.join(overrides)}: {' '.join(str(e).split())}") from e
     flow = build_flow(cfg.flow)
     return EvalSpec(flow, build_task(cfg.task, flow), cfg.env, episodes, seed=seed, chunk_size=chunk_size)
 
