@@ -93,38 +93,44 @@ def run_cost(spec: str) -> dict:
     return row
 
 
-def pipeline_cost(experiment: str) -> dict:
+def pipeline_cost(experiment: str, overrides: list[str] | tuple = ()) -> dict:
     """What training a shipped student from nothing takes: its own run and the run of every network its teacher is
-    made of (``teacher_checkpoint`` and the scene experts ``algo.scene_*expert`` of ``conf/experiment/<name>.yaml``),
-    one run each, as each shipped checkpoint recorded it (wall time, threads; a DAgger run's before its final
-    evaluation). The routed teacher's scripted rules (``scene_currents``, ``scene_free_flows``) train nothing."""
+    made of (``teacher_checkpoint`` and the scene experts ``algo.scene_*expert`` of ``conf/experiment/<name>.yaml``,
+    with ``overrides``: e.g. a run's checkpoints before they ship), one run each, as each checkpoint recorded it (wall
+    time, threads; a DAgger run's before its final evaluation). A network that labels several scenes trained once:
+    one row, its roles listed. The routed teacher's scripted rules (``scene_currents``, ``scene_free_flows``) train
+    nothing."""
     from flownav.builders import compose_config
     from flownav.checkpoint import load_checkpoint
     from flownav.paths import resolve
 
-    cfg = compose_config([f"+experiment={experiment}"])
+    cfg = compose_config([f"+experiment={experiment}", *overrides])
     parts = {"teacher_checkpoint": cfg.teacher_checkpoint}
     parts |= {k: v for k, v in cfg.algo.items() if k.startswith("scene_") and k.endswith("expert") and v}
-    parts["student"] = cfg.output_checkpoint
-    rows = []
+    roles: dict[str, list[str]] = {}
     for role, path in parts.items():
-        payload = load_checkpoint(resolve(str(path)))
+        roles.setdefault(str(path), []).append(role)
+    roles[str(cfg.output_checkpoint)] = ["student"]
+    rows = []
+    for path, named in roles.items():
+        payload = load_checkpoint(resolve(path))
         meta, state = payload.get("meta") or {}, payload.get("train_state") or {}
         rows.append(
             {
-                "role": role,
-                "checkpoint": str(path),
+                "roles": named,
+                "checkpoint": path,
                 "experiment": (meta.get("config") or {}).get("name"),
                 "wall_time_min": state["wall_time"] / 60,
                 "threads": (meta.get("config") or {}).get("threads"),
                 "frames": meta.get("frames"),
             }
         )
-    teachers = sum(r["wall_time_min"] for r in rows if r["role"] != "student")
+    teachers = sum(r["wall_time_min"] for r in rows[:-1])
     return {
         "what": f"training cost of {experiment} from nothing: every network of its teacher and its own run, one run "
-        "each, as the shipped checkpoints recorded it (train_state.wall_time; each ran on this machine beside what "
-        "else ran then)",
+        "each, as the checkpoints recorded it (train_state.wall_time; each ran on this machine beside what else ran "
+        "then)",
+        "overrides": list(overrides),
         "results": rows,
         "teacher_networks_min": teachers,
         "total_min": teachers + rows[-1]["wall_time_min"],
@@ -143,12 +149,15 @@ def main():
     parser.add_argument("--cost-file", default="generalist_cost", help="benchmarks/results/<this>.json for --cost")
     parser.add_argument("--pipeline", help="an experiment (generalist_student): its whole training cost, from the "
                         "shipped checkpoints, to benchmarks/results/<experiment>_pipeline_cost.json")  # fmt: skip
+    parser.add_argument("--override", action="append", default=[], help="with --pipeline: a Hydra override of the "
+                        "experiment, e.g. algo.scene_away_expert=<run>/checkpoints/last.pt")  # fmt: skip
+    parser.add_argument("--pipeline-file", help="with --pipeline: benchmarks/results/<this>.json instead")
     args = parser.parse_args()
     if args.pipeline:
-        payload = pipeline_cost(args.pipeline)
+        payload = pipeline_cost(args.pipeline, args.override)
         payload |= {"command": "python benchmarks/family_throughput.py " + " ".join(sys.argv[1:]), "machine": machine()}
         payload["headline"] = {k: payload[k] for k in ("teacher_networks_min", "total_min")}
-        write_result(f"{args.pipeline}_pipeline_cost", payload)
+        write_result(args.pipeline_file or f"{args.pipeline}_pipeline_cost", payload)
         return
     if args.cost:
         payload = {

@@ -1,6 +1,7 @@
 """The benchmarks' own code paths at tiny size, so that a change of the env's internals cannot break them
 unseen (their timings are never asserted)."""
 
+import pytest
 import torch
 from load import load_module
 
@@ -74,11 +75,22 @@ def test_the_pipeline_cost_counts_every_network_the_students_teacher_is_made_of(
     from flownav.checkpoint import load_checkpoint
     from flownav.paths import CHECKPOINT_DIR
 
-    cost = _load("family_throughput").pipeline_cost("generalist_student")
-    roles = [r["role"] for r in cost["results"]]
-    assert roles == ["teacher_checkpoint", "scene_expert", "scene_reverse_expert", "scene_away_expert",
-                     "scene_wake_expert", "scene_wake_regions_expert", "student"]  # fmt: skip
-    away = next(r for r in cost["results"] if r["role"] == "scene_away_expert")
+    pipeline_cost = _load("family_throughput").pipeline_cost
+    cost = pipeline_cost("generalist_student")
+    roles = [r["roles"] for r in cost["results"]]
+    assert roles == [["teacher_checkpoint"], ["scene_expert"], ["scene_reverse_expert"], ["scene_away_expert"],
+                     ["scene_wake_expert"], ["scene_wake_regions_expert"], ["student"]]  # fmt: skip
+    away = next(r for r in cost["results"] if r["roles"] == ["scene_away_expert"])
     wall = load_checkpoint(CHECKPOINT_DIR / "generalist_away_expert.pt")["train_state"]["wall_time"]
     assert away["wall_time_min"] == wall / 60
     assert cost["total_min"] == sum(r["wall_time_min"] for r in cost["results"])
+    # A network that labels two scenes trained once: counted once.
+    turned = "algo.scene_reverse_expert=checkpoints/generalist_wake_expert_turned.pt"
+    shared = pipeline_cost("generalist_student", [turned])
+    assert [r["roles"] for r in shared["results"]][2:5] == [
+        ["scene_reverse_expert", "scene_wake_expert"],
+        ["scene_away_expert"],
+        ["scene_wake_regions_expert"],
+    ]
+    reverse = next(r for r in cost["results"] if r["roles"] == ["scene_reverse_expert"])
+    assert shared["teacher_networks_min"] == pytest.approx(cost["teacher_networks_min"] - reverse["wall_time_min"])

@@ -80,8 +80,14 @@ def test_every_student_imitates_a_teacher_trained_on_its_flow_and_task():
                 m = cfg.task.margin
                 assert all(WAKE_BOUNDS.lo[i] + m <= lo[i] < hi[i] <= WAKE_BOUNDS.hi[i] - m for i in range(3)), name
             maker = makers.get(cfg.algo.scene_expert, Path(cfg.algo.scene_expert).stem)
-            expert = cfgs[maker]  # the paper's teacher, made in the paper's scene
-            assert (expert.flow.type, expert.task.type, expert.obs.view) == ("grid", "regions", "geo_sincos"), name
+            expert = cfgs[maker]
+            if expert.algo.name == "ppo":  # the paper's teacher, made in the paper's scene
+                assert (expert.flow.type, expert.task.type, expert.obs.view) == ("grid", "regions", "geo_sincos"), name
+            else:  # an oracle imitator whose episodes include the paper's task in the wake as posed
+                assert expert.algo.name == "oracle_dagger" and expert.task.posed_wake_regions_share == 1.0, name
+                posed = {"angle_deg": [0.0, 0.0], "strength": [1.0, 1.0], "background": [0.0, 0.0]}
+                members = expert.flow.members.values()
+                assert any(m.type == "wake" and all(m[k] == v for k, v in posed.items()) for m in members), name
         else:
             assert cfgs[teacher].flow == cfg.flow and cfgs[teacher].task == cfg.task, f"{name} vs {teacher}"
         assert cfgs[teacher].obs.view != cfg.obs.view and cfg.algo.beta.initial == 0.0, name
