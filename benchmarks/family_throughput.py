@@ -6,7 +6,9 @@ Run: ``python benchmarks/family_throughput.py [--threads 1] [--batch 4096] [--se
 teacher=<run dir> --cost student=<run dir> ...`` writes the training runs' wall times (their
 ``final_metrics.json``, and each one's against the first's) to ``benchmarks/results/generalist_cost.json``
 (``--cost-file NAME``: NAME.json) instead; ``--pipeline generalist_student`` writes what training that student
-from nothing takes, every network of its teacher included, from the shipped checkpoints' recorded wall times.
+from nothing takes, every network of its teacher included (one row per network, its scene roles listed), from the
+checkpoints' recorded wall times (``--override KEY=VALUE``: the experiment's config changed, e.g.
+``output_checkpoint=<run>/checkpoints/last.pt`` for a student that is not shipped; ``--pipeline-file NAME``: NAME.json).
 
 Every case steps ``NavigationEnv.step_and_maybe_reset`` with random actions (resets included) on the flow
 config ``conf/flow/<name>.yaml`` and the task the generalist trains on (``task=family``; the wake alone: the
@@ -94,12 +96,12 @@ def run_cost(spec: str) -> dict:
 
 
 def pipeline_cost(experiment: str, overrides: list[str] | tuple = ()) -> dict:
-    """What training a shipped student from nothing takes: its own run and the run of every network its teacher is
-    made of (``teacher_checkpoint`` and the scene experts ``algo.scene_*expert`` of ``conf/experiment/<name>.yaml``,
-    with ``overrides``: e.g. a run's checkpoints before they ship), one run each, as each checkpoint recorded it (wall
-    time, threads; a DAgger run's before its final evaluation). A network that labels several scenes trained once:
-    one row, its roles listed. The routed teacher's scripted rules (``scene_currents``, ``scene_free_flows``) train
-    nothing."""
+    """What training a student from nothing takes: its own run and the run of every network its teacher is made of
+    (``teacher_checkpoint`` and the scene experts ``algo.scene_*expert`` of ``conf/experiment/<name>.yaml``, with
+    ``overrides``: e.g. ``output_checkpoint=<run>/checkpoints/last.pt`` for a student that is not shipped), one run
+    each, as each checkpoint recorded it (wall time, threads; a DAgger run's before its final evaluation). A network
+    that labels several scenes trained once: one row, its roles listed; the student's row comes last. The routed
+    teacher's scripted rules (``scene_currents``, ``scene_free_flows``) train nothing."""
     from flownav.builders import compose_config
     from flownav.checkpoint import load_checkpoint
     from flownav.paths import resolve
@@ -107,17 +109,20 @@ def pipeline_cost(experiment: str, overrides: list[str] | tuple = ()) -> dict:
     cfg = compose_config([f"+experiment={experiment}", *overrides])
     parts = {"teacher_checkpoint": cfg.teacher_checkpoint}
     parts |= {k: v for k, v in cfg.algo.items() if k.startswith("scene_") and k.endswith("expert") and v}
-    roles: dict[str, list[str]] = {}
+    networks: dict[Path, tuple[str, list[str]]] = {}  # one entry per file, however it is spelled
     for role, path in parts.items():
-        roles.setdefault(str(path), []).append(role)
-    roles[str(cfg.output_checkpoint)] = ["student"]
+        networks.setdefault(resolve(str(path)).resolve(), (str(path), []))[1].append(role)
+    student = resolve(str(cfg.output_checkpoint)).resolve()
+    if student in networks:
+        raise ValueError(f"output_checkpoint {cfg.output_checkpoint} is a network of the teacher: pass the student's")
+    networks[student] = (str(cfg.output_checkpoint), ["student"])
     rows = []
-    for path, named in roles.items():
-        payload = load_checkpoint(resolve(path))
+    for file, (path, roles) in networks.items():
+        payload = load_checkpoint(file)
         meta, state = payload.get("meta") or {}, payload.get("train_state") or {}
         rows.append(
             {
-                "roles": named,
+                "roles": roles,
                 "checkpoint": path,
                 "experiment": (meta.get("config") or {}).get("name"),
                 "wall_time_min": state["wall_time"] / 60,
@@ -148,7 +153,7 @@ def main():
     parser.add_argument("--cost", action="append", default=[], help="name=<run dir> of a finished training run")
     parser.add_argument("--cost-file", default="generalist_cost", help="benchmarks/results/<this>.json for --cost")
     parser.add_argument("--pipeline", help="an experiment (generalist_student): its whole training cost, from the "
-                        "shipped checkpoints, to benchmarks/results/<experiment>_pipeline_cost.json")  # fmt: skip
+                        "checkpoints it names, to benchmarks/results/<experiment>_pipeline_cost.json")  # fmt: skip
     parser.add_argument("--override", action="append", default=[], help="with --pipeline: a Hydra override of the "
                         "experiment, e.g. algo.scene_away_expert=<run>/checkpoints/last.pt")  # fmt: skip
     parser.add_argument("--pipeline-file", help="with --pipeline: benchmarks/results/<this>.json instead")

@@ -94,3 +94,10 @@ def test_the_pipeline_cost_counts_every_network_the_students_teacher_is_made_of(
     ]
     reverse = next(r for r in cost["results"] if r["roles"] == ["scene_reverse_expert"])
     assert shared["teacher_networks_min"] == pytest.approx(cost["teacher_networks_min"] - reverse["wall_time_min"])
+    assert shared["results"][-1]["roles"] == ["student"]
+    assert shared["total_min"] == pytest.approx(sum(r["wall_time_min"] for r in shared["results"]))
+    # One file however it is spelled; the student is never one of its teacher's networks.
+    spelled = pipeline_cost("generalist_student", [turned.replace("=checkpoints/", f"={CHECKPOINT_DIR}/")])
+    assert [r["roles"] for r in spelled["results"]] == [r["roles"] for r in shared["results"]]
+    with pytest.raises(ValueError, match="output_checkpoint checkpoints/generalist_teacher.pt is a network of the"):
+        pipeline_cost("generalist_student", ["output_checkpoint=checkpoints/generalist_teacher.pt"])
