@@ -8,7 +8,7 @@ teacher=<run dir> --cost student=<run dir> ...`` writes the training runs' wall 
 (``--cost-file NAME``: NAME.json) instead; ``--pipeline generalist_student`` writes what training that student
 from nothing takes, every network of its teacher included (one row per network, its scene roles listed), from the
 checkpoints' recorded wall times (``--override KEY=VALUE``: the experiment's config changed, e.g.
-``output_checkpoint=<run>/checkpoints/last.pt`` for a student that is not shipped; ``--pipeline-file NAME``: NAME.json).
+``output_checkpoint=<run>/checkpoints/last.pt`` for a student that is not shipped).
 
 Every case steps ``NavigationEnv.step_and_maybe_reset`` with random actions (resets included) on the flow
 config ``conf/flow/<name>.yaml`` and the task the generalist trains on (``task=family``; the wake alone: the
@@ -156,13 +156,12 @@ def main():
                         "checkpoints it names, to benchmarks/results/<experiment>_pipeline_cost.json")  # fmt: skip
     parser.add_argument("--override", action="append", default=[], help="with --pipeline: a Hydra override of the "
                         "experiment, e.g. algo.scene_away_expert=<run>/checkpoints/last.pt")  # fmt: skip
-    parser.add_argument("--pipeline-file", help="with --pipeline: benchmarks/results/<this>.json instead")
     args = parser.parse_args()
     if args.pipeline:
         payload = pipeline_cost(args.pipeline, args.override)
         payload |= {"command": "python benchmarks/family_throughput.py " + " ".join(sys.argv[1:]), "machine": machine()}
         payload["headline"] = {k: payload[k] for k in ("teacher_networks_min", "total_min")}
-        write_result(args.pipeline_file or f"{args.pipeline}_pipeline_cost", payload)
+        write_result(f"{args.pipeline}_pipeline_cost", payload)
         return
     if args.cost:
         payload = {
