@@ -43,22 +43,18 @@ def _scale_pi(value):
     return [[float(x) * math.pi for x in corner] for corner in value]
 
 
-def _family_member(
-    cfg: Mapping, key: str, bounds: Box, device, periodic: tuple[int, ...] = (), in_sum: bool = False
-) -> FlowFamily:
+def _family_member(cfg: Mapping, key: str, bounds: Box, device, periodic: tuple[int, ...] = ()) -> FlowFamily:
     """One member of a flow family (flownav/flows/families.py): its type and its constructor's arguments;
-    ``periodic``: the family's periodic axes, on which random Fourier modes take whole periods of the box;
-    ``in_sum``: a part of a sum, which every swimmer of that member gets (a weight there would mean nothing)."""
-    if in_sum and "weight" in cfg:
-        raise ConfigError(f"{key}.weight: a part of a sum has no weight (every part is added); drop it")
+    ``periodic``: the family's periodic axes, on which random Fourier modes take whole periods of the box."""
     args = {k: v for k, v in cfg.items() if k not in ("type", "weight")}
     kind = cfg.get("type")
     if kind == "sum":
         if extra := sorted(set(args) - {"members"}):
             raise ConfigError(f"{key} (type: sum) has an unknown key {extra[0]!r}; a sum takes only members")
-        parts = args.get("members") or {}
-        members = [_family_member(m, f"{key}.members.{n}", bounds, device, periodic, True) for n, m in parts.items()]
-        return SumFamily(members, bounds)
+        parts = {f"{key}.members.{n}": m for n, m in (args.get("members") or {}).items()}
+        if weighted := [k for k, m in parts.items() if "weight" in m]:  # every part is added to every swimmer's flow
+            raise ConfigError(f"{weighted[0]}.weight: a part of a sum has no weight (every part is added); drop it")
+        return SumFamily([_family_member(m, k, bounds, device, periodic) for k, m in parts.items()], bounds)
     if kind == "fourier" and periodic:
         args["periodic_axes"] = periodic
 
