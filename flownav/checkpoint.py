@@ -25,7 +25,7 @@ from pathlib import Path
 
 import torch
 
-from flownav.agents.networks import DeterministicPolicy
+from flownav.agents.networks import DeterministicPolicy, warm_start_state
 from flownav.atomic import atomic_write
 from flownav.envs.observations import observation_size
 from flownav.errors import CheckpointError, ConfigError, NonFiniteError
@@ -307,6 +307,19 @@ def check_resume_settings(resume, payload: dict, config: dict) -> None:
             "a resume continues that run with its settings: drop these overrides (a resume may change only "
             "the budget algo.total_frames / algo.iterations, threads, device, logger, checkpoint_every and shipping)"
         )
+
+
+def warm_start(policy, path, view: str) -> dict:
+    """Start ``policy`` (it reads ``view``) from the network of the checkpoint at ``path`` (``algo.init_from``):
+    its weights and normaliser. Returns the checkpoint."""
+    payload = load_checkpoint(path)
+    if payload["obs"] != view:
+        raise ConfigError(
+            f"algo.init_from={path} reads {payload['obs']!r}, this run reads {view!r}: start from a checkpoint of "
+            f"the run's view or set obs={payload['obs']}"
+        )
+    policy.load_state_dict(warm_start_state(policy, payload["policy"]))
+    return payload
 
 
 def load_policy(path, expect_obs: str | None = None, device="cpu") -> tuple[DeterministicPolicy, dict]:

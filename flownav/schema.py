@@ -378,6 +378,7 @@ ORACLE_DAGGER = {
     },
     "iterations": Int(ge=1),
     "episodes": Int(ge=1),
+    "init_from": Str(null=True),
     "beta_decay": Float(ge=0, le=1),
     "epochs": Int(ge=1),
     "batch_size": Int(ge=1),

@@ -3,6 +3,8 @@ label, a network learns the planner on a tiny problem, runs resume exactly, a sh
 
 from __future__ import annotations
 
+import re
+
 import pytest
 import torch
 from tiny import DRIFT_TASK, compose_train
@@ -77,3 +79,35 @@ def test_an_unknown_oracle_is_named_with_the_choices(tmp_path):
 
     with pytest.raises(ConfigError, match=r"algo.oracle is 'planner'; choose one of \['oracle', 'oracle_long'\]"):
         train.run(compose_train(*TINY, "algo.oracle=planner"), tmp_path / "run")
+
+
+def test_a_warm_start_begins_from_the_saved_network_and_keeps_its_normaliser(tmp_path):
+    """algo.init_from: the run's network starts as the saved one (weights and normaliser), and the normaliser stays
+    the saved one through every refit (the weights read it), not the new pairs' statistics."""
+    import train
+
+    quick = ["algo.episodes=8", "algo.epochs=1", "algo.eval_episodes=0", "algo.iterations=1"]
+    train.run(compose_train(*TINY, *quick), tmp_path / "source")
+    source = load_checkpoint(tmp_path / "source/checkpoints/last.pt")["policy"]["state_dict"]
+    warm = [f"algo.init_from={tmp_path / 'source/checkpoints/last.pt'}", "algo.lr=1e-12", "seed=5"]
+    train.run(compose_train(*TINY, *quick, *warm), tmp_path / "warm")
+    started = load_checkpoint(tmp_path / "warm/checkpoints/last.pt")["policy"]["state_dict"]
+    assert all(torch.equal(started[k], v) for k, v in source.items() if k.startswith("normalizer."))
+    assert all(torch.allclose(started[k], v, atol=1e-6) for k, v in source.items())  # lr 1e-12: no step away
+    train.run(compose_train(*TINY, *quick, "seed=5"), tmp_path / "cold")
+    cold = load_checkpoint(tmp_path / "cold/checkpoints/last.pt")["policy"]["state_dict"]
+    assert not torch.equal(cold["normalizer.mean"], source["normalizer.mean"])  # other pairs, other statistics
+
+
+def test_a_warm_start_of_another_view_is_refused_in_one_line(tmp_path):
+    import train
+
+    quick = ["algo.episodes=8", "algo.epochs=1", "algo.eval_episodes=0", "algo.iterations=1"]
+    train.run(compose_train(*TINY, *quick), tmp_path / "source")
+    source = tmp_path / "source/checkpoints/last.pt"
+    message = (
+        f"algo.init_from={source} reads 'geo_priv', this run reads 'geo': start from a checkpoint of the run's view "
+        "or set obs=geo_priv"
+    )
+    with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
+        train.run(compose_train(*TINY, *quick, "obs=geo", f"algo.init_from={source}"), tmp_path / "warm")

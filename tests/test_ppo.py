@@ -237,7 +237,8 @@ def test_a_dagger_student_warm_starts_the_ppo_actor_with_its_own_action():
     other, *_ = make_actor_critic("geo_sincos", "geo_sincos", low, high, with_prior, cfg.algo.critic)
     message = (
         "the checkpoint's policy corrects prior=None turning None, this one prior=geo_sincos turning left_biased: "
-        "set algo.actor.prior and algo.actor.prior_turn to match"
+        "set algo.actor.prior and algo.actor.prior_turn (PPO) or algo.prior and algo.prior_turn (oracle DAgger) "
+        "to match"
     )
     with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
         warm_start_state(other, payload["policy"])

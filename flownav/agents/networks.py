@@ -145,8 +145,8 @@ def warm_start_state(policy: DeterministicPolicy, saved: dict) -> dict:
     if prior(mine) != prior(theirs):
         raise ConfigError(
             f"the checkpoint's policy corrects prior={theirs.get('prior')} turning {prior(theirs)[1]}, this one "
-            f"prior={mine.get('prior')} turning {prior(mine)[1]}: set algo.actor.prior and algo.actor.prior_turn to "
-            "match"
+            f"prior={mine.get('prior')} turning {prior(mine)[1]}: set algo.actor.prior and algo.actor.prior_turn "
+            "(PPO) or algo.prior and algo.prior_turn (oracle DAgger) to match"
         )
     state = dict(saved["state_dict"])
     a = policy.action_dim

@@ -11,8 +11,9 @@ One iteration ``i``, read top to bottom in :func:`train`:
    behaviour is that action with probability ``beta_decay ** i`` (iteration 0: the oracle alone), else the
    network's.
 2. **Aggregate.** The (network's view, oracle action) pairs of all iterations so far are kept.
-3. **Fit.** The observation normaliser set to their mean and variance; Adam restarted (the data changed) for
-   ``epochs`` passes over all of them in shuffled minibatches, minimising eq. 9.
+3. **Fit.** The observation normaliser set to their mean and variance (with ``init_from``, the saved network's
+   kept: its weights read that one); Adam restarted (the data changed) for ``epochs`` passes over all of them in
+   shuffled minibatches, minimising eq. 9.
 4. **Evaluate.** ``eval_episodes`` held-out episodes of the protocol (``python evaluate.py``'s seed).
 
 Collection episodes use seeds far from the protocol's, and the oracle's sampling its own seed, both per iteration,
@@ -34,7 +35,7 @@ from flownav.algorithms.common import eval_metrics, require_finite_update
 from flownav.algorithms.dagger import imitation_loss, set_normalizer_from
 from flownav.atomic import atomic_write_text
 from flownav.builders import build_env, build_flow, build_task
-from flownav.checkpoint import RunCheckpoints, load_resume_checkpoint
+from flownav.checkpoint import RunCheckpoints, load_resume_checkpoint, warm_start
 from flownav.devices import resolve_device
 from flownav.envs.navigation import Status
 from flownav.envs.observations import observation_size
@@ -81,9 +82,11 @@ def collect(env, oracle: Oracle, student, view: str, beta: float, gen: torch.Gen
     return torch.cat(obs), torch.cat(labels), status
 
 
-def fit(student, optim, obs, labels, epochs: int, batch: int, gen: torch.Generator) -> float:
-    """Refit on all pairs: normaliser to their statistics, Adam from a fresh state, ``epochs`` shuffled passes."""
-    set_normalizer_from(student, obs)
+def fit(student, optim, obs, labels, epochs: int, batch: int, gen: torch.Generator, refit_norm: bool = True) -> float:
+    """Refit on all pairs: normaliser to their statistics (unless not ``refit_norm``), Adam from a fresh state,
+    ``epochs`` shuffled passes."""
+    if refit_norm:
+        set_normalizer_from(student, obs)
     optim.state.clear()
     student.train()
     loss = torch.tensor(0.0)
@@ -118,6 +121,9 @@ def train(cfg, run_dir) -> dict:
     student = DeterministicPolicy(
         observation_size(view), low, high, hidden=list(a.hidden), activation=str(a.activation), **prior
     ).to(device)
+    refit_norm = not a.get("init_from")  # a warm start's weights read its own normaliser
+    if a.get("init_from") and not cfg.get("resume"):  # a resume carries its own weights
+        warm_start(student, str(a.init_from), view)
     student.eval()
     optim = torch.optim.Adam(student.net.parameters(), lr=float(a.lr))
     spec = EvalSpec(flow, task, cfg.env, eval_episodes, chunk_size=max(eval_episodes, 1), device=str(device))
@@ -151,7 +157,7 @@ def train(cfg, run_dir) -> dict:
         all_obs.append(obs)
         all_labels.append(labels)
         pairs_obs = torch.cat(all_obs)
-        loss = fit(student, optim, pairs_obs, torch.cat(all_labels), int(a.epochs), int(a.batch_size), gen)
+        loss = fit(student, optim, pairs_obs, torch.cat(all_labels), int(a.epochs), int(a.batch_size), gen, refit_norm)
         iteration += 1
         last = checkpoints.directory / "last.pt"
         require_finite_update("oracle DAgger", iteration, {"train/loss": loss}, student, last, NON_FINITE_FIX)

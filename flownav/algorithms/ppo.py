@@ -25,10 +25,10 @@ from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
 from flownav.agents.actor_critic import make_actor_critic
-from flownav.agents.networks import DeterministicPolicy, warm_start_state
+from flownav.agents.networks import DeterministicPolicy
 from flownav.algorithms.common import eval_metrics, require_finite_update
 from flownav.builders import build_env, build_flow, build_task
-from flownav.checkpoint import RunCheckpoints, load_checkpoint, load_policy, load_resume_checkpoint
+from flownav.checkpoint import RunCheckpoints, load_policy, load_resume_checkpoint, warm_start
 from flownav.devices import check_on_device, resolve_device
 from flownav.envs.observations import GEO_VIEWS
 from flownav.episode_window import EpisodeWindow, resume_episodes, with_episode_return
@@ -160,10 +160,7 @@ def train(cfg, run_dir) -> dict:
         critic_net.load_state_dict(resumed["train_state"]["critic"])
         warm_actor = warm_critic = False
     elif a.get("init_from"):  # weights and normalisers from another run, counters from zero
-        payload = load_checkpoint(str(a.init_from))
-        if payload["obs"] != obs_key:
-            raise ConfigError(f"algo.init_from={a.init_from} reads {payload['obs']!r}, this run reads {obs_key!r}")
-        policy.load_state_dict(warm_start_state(policy, payload["policy"]))
+        payload = warm_start(policy, str(a.init_from), obs_key)
         warm_actor = False
         if payload.get("train_state") and "critic" in payload["train_state"]:  # else (a DAgger student) a fresh critic
             critic_net.load_state_dict(payload["train_state"]["critic"])
