@@ -83,8 +83,8 @@ def collect(env, oracle: Oracle, student, view: str, beta: float, gen: torch.Gen
 
 
 def fit(student, optim, obs, labels, epochs: int, batch: int, gen: torch.Generator, refit_norm: bool = True) -> float:
-    """Refit on all pairs: normaliser to their statistics (unless not ``refit_norm``), Adam from a fresh state,
-    ``epochs`` shuffled passes."""
+    """Refit on all pairs: normaliser to their statistics (if ``refit_norm``), Adam from a fresh state, ``epochs``
+    shuffled passes."""
     if refit_norm:
         set_normalizer_from(student, obs)
     optim.state.clear()
@@ -121,8 +121,8 @@ def train(cfg, run_dir) -> dict:
     student = DeterministicPolicy(
         observation_size(view), low, high, hidden=list(a.hidden), activation=str(a.activation), **prior
     ).to(device)
-    refit_norm = not a.get("init_from")  # a warm start's weights read its own normaliser
-    if a.get("init_from") and not cfg.get("resume"):  # a resume carries its own weights
+    warm = bool(a.get("init_from"))  # its weights read the saved normaliser: kept through every refit
+    if warm and not cfg.get("resume"):  # a resume carries its own weights
         warm_start(student, str(a.init_from), view)
     student.eval()
     optim = torch.optim.Adam(student.net.parameters(), lr=float(a.lr))
@@ -157,7 +157,7 @@ def train(cfg, run_dir) -> dict:
         all_obs.append(obs)
         all_labels.append(labels)
         pairs_obs = torch.cat(all_obs)
-        loss = fit(student, optim, pairs_obs, torch.cat(all_labels), int(a.epochs), int(a.batch_size), gen, refit_norm)
+        loss = fit(student, optim, pairs_obs, torch.cat(all_labels), int(a.epochs), int(a.batch_size), gen, not warm)
         iteration += 1
         last = checkpoints.directory / "last.pt"
         require_finite_update("oracle DAgger", iteration, {"train/loss": loss}, student, last, NON_FINITE_FIX)
