@@ -60,12 +60,18 @@ def rows(run_dir):
         return [r for r in csv.DictReader(f) if r.get("train/loss")]
 
 
-def test_every_student_imitates_a_teacher_trained_on_its_flow_and_task():
-    """Each DAgger experiment's teacher checkpoint is made by a PPO experiment on the same flow and task, read
-    through another view than the student's, and the student acts alone from the first step (the paper's beta 0)."""
+@pytest.fixture(scope="module")
+def experiment_cfgs() -> dict:
+    """Every experiment of conf/experiment, composed: {name: config}."""
     experiments = sorted(p.stem for p in (ROOT / "conf" / "experiment").glob("*.yaml"))
     with initialize_config_dir(config_dir=CONF, version_base="1.3"):
-        cfgs = {e: compose("config", overrides=[f"+experiment={e}"]) for e in experiments}
+        return {e: compose("config", overrides=[f"+experiment={e}"]) for e in experiments}
+
+
+def test_every_student_imitates_a_teacher_trained_on_its_flow_and_task(experiment_cfgs):
+    """Each DAgger experiment's teacher checkpoint is made by a PPO experiment on the same flow and task, read
+    through another view than the student's, and the student acts alone from the first step (the paper's beta 0)."""
+    cfgs = experiment_cfgs
     makers = {c.output_checkpoint: e for e, c in cfgs.items() if c.algo.name == "ppo" and c.output_checkpoint}
     students = {e: c for e, c in cfgs.items() if c.algo.name == "dagger"}
     assert students
@@ -91,6 +97,23 @@ def test_every_student_imitates_a_teacher_trained_on_its_flow_and_task():
         else:
             assert cfgs[teacher].flow == cfg.flow and cfgs[teacher].task == cfg.task, f"{name} vs {teacher}"
         assert cfgs[teacher].obs.view != cfg.obs.view and cfg.algo.beta.initial == 0.0, name
+
+
+def test_every_scene_expert_a_student_reads_is_made_by_an_experiment(experiment_cfgs):
+    """Every expert file of a routed teacher (``algo.scene_*_expert``) is the output of an experiment that trains it
+    (PPO, or oracle DAgger reading a view the router accepts), so a clean checkout can remake every label."""
+    makers = {str(c.output_checkpoint): c for c in experiment_cfgs.values() if c.get("output_checkpoint")}
+    routed = {e: c for e, c in experiment_cfgs.items() if c.algo.name == "dagger" and c.algo.get("scene_expert")}
+    assert routed
+    for name, cfg in routed.items():
+        experts = {k: v for k, v in cfg.algo.items() if k.startswith("scene_") and k.endswith("expert") and v}
+        assert "scene_expert" in experts, name
+        for key, path in experts.items():
+            maker = makers.get(path, experiment_cfgs.get(Path(path).stem))  # selection ships by name
+            assert maker is not None, f"{name}: algo.{key}={path} is made by no experiment"
+            assert maker.algo.name in ("ppo", "oracle_dagger"), f"{name}: {key}"
+            if maker.algo.name == "oracle_dagger":
+                assert maker.obs.view in ("geo_priv", "geo_priv_wake"), f"{name}: {key} reads {maker.obs.view}"
 
 
 def unweighted(cfg) -> dict:
