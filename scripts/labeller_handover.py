@@ -29,6 +29,7 @@ from torch import Tensor
 from flownav.builders import compose_config
 from flownav.checkpoint import load_policy
 from flownav.envs.core import SCENE_AWAY, observe, paper_scene
+from flownav.errors import ConfigError, reported_as_one_line
 from flownav.evaluation.metrics import wilson_interval
 from flownav.evaluation.protocol import EvalSpec
 from flownav.evaluation.rollout import Episodes, run_episodes
@@ -41,7 +42,12 @@ FAR_STARTS = ("flow=family_wake_posed", "task=posed_wake_any_start")
 def load(name: str):
     """(policy, view) of a checkpoint file or of ``scripted:<name>`` (flownav/evaluation/scripted.py)."""
     if name.startswith("scripted:"):
-        policy = SCRIPTED[name.split(":", 1)[1]]()
+        kind = name.split(":", 1)[1]
+        if kind not in SCRIPTED:
+            raise ConfigError(
+                f"{name} names no scripted policy; choose scripted:<{'|'.join(SCRIPTED)}> or a checkpoint"
+            )
+        policy = SCRIPTED[kind]()
         return policy, scripted_view(policy)
     policy, payload = load_policy(resolve(name))
     return policy, payload["obs"]
@@ -127,15 +133,18 @@ def main(argv=None) -> None:
     parser.add_argument("--threads", type=int, default=1)
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
-    cfg = compose_config([*FAR_STARTS, *args.set], app="evaluate")
-    spec = EvalSpec.from_config(cfg, episodes=args.episodes)
-    for r in handover_rows(args.student, args.labellers, args.steps, spec, args.scene):
-        lo, hi = r["success_ci95"]
-        print(
-            f"step {r['step']:>3} | {r['labeller']}: {100 * r['success']:.2f}% [{100 * lo:.2f}, {100 * hi:.2f}] "
-            f"of {r['episodes']} (the student alone {100 * r['student_alone']:.2f}%)",
-            flush=True,
-        )
+    with reported_as_one_line():
+        for name in (args.student, *args.labellers):
+            load(name)  # every policy readable before the first episode
+        cfg = compose_config([*FAR_STARTS, *args.set], app="evaluate")
+        spec = EvalSpec.from_config(cfg, episodes=args.episodes)
+        for r in handover_rows(args.student, args.labellers, args.steps, spec, args.scene):
+            lo, hi = r["success_ci95"]
+            print(
+                f"step {r['step']:>3} | {r['labeller']}: {100 * r['success']:.2f}% [{100 * lo:.2f}, {100 * hi:.2f}] "
+                f"of {r['episodes']} (the student alone {100 * r['student_alone']:.2f}%)",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -42,3 +42,11 @@ def test_rows_count_the_scenes_episodes_still_running_at_the_hand_over(spec):
     assert [r["episodes"] for r in rows] == [int(far.sum()), int((far & (alone.time > 10.5 * dt)).sum())]
     assert rows[0]["success"] == 0.0  # the passive swimmer from the start reaches no far target
     assert rows[0]["student_alone"] == int(alone.success[far].sum()) / int(far.sum()) > 0
+
+
+def test_a_policy_it_cannot_read_is_one_line_before_any_episode(capsys):
+    with pytest.raises(SystemExit) as stop:
+        handover.main(["scripted:passive", "scripted:drift"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "scripted:drift names no scripted policy; choose scripted:<head_to_target|" in err
