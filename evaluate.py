@@ -32,10 +32,9 @@ from omegaconf import DictConfig, OmegaConf
 
 from flownav import schema
 from flownav.atomic import atomic_write_text
-from flownav.checkpoint import load_policy
 from flownav.errors import ConfigError, reported_as_one_line
 from flownav.evaluation.protocol import EvalSpec, evaluate
-from flownav.evaluation.scripted import SCRIPTED, scripted_view
+from flownav.evaluation.scripted import load_evaluated
 from flownav.evaluation.tables import log_line
 from flownav.paths import REPO_ROOT, resolve
 from flownav.shipping import is_shipped
@@ -45,21 +44,9 @@ def command_line() -> str:
     return "python evaluate.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
 
 
-def load_evaluated(checkpoint: str, cfg: DictConfig):
-    """(policy, payload) of a checkpoint file, or of a scripted reference named ``scripted:<name>``
-    (flownav/evaluation/scripted.py), which reads the geo view unless it names another."""
-    if not checkpoint.startswith("scripted:"):
-        return load_policy(resolve(checkpoint), expect_obs=cfg.get("expect_obs"), device=cfg.device)
-    kind = checkpoint.split(":", 1)[1]
-    if kind not in SCRIPTED:
-        raise ConfigError(f"checkpoint={checkpoint} names no scripted policy; choose scripted:<{'|'.join(SCRIPTED)}>")
-    policy = SCRIPTED[kind]()
-    return policy, {"obs": scripted_view(policy), "role": "reference"}
-
-
 def evaluate_checkpoint(cfg: DictConfig, log=print) -> dict:
     """Evaluate ``cfg.checkpoint`` on ``cfg.flow`` / ``cfg.task`` / ``cfg.env`` for ``cfg.episodes`` episodes."""
-    policy, payload = load_evaluated(str(cfg.checkpoint), cfg)
+    policy, payload = load_evaluated(str(cfg.checkpoint), expect_obs=cfg.get("expect_obs"), device=cfg.device)
     obs = payload["obs"]
     t0 = time.time()
     out = evaluate(policy, obs, EvalSpec.from_config(cfg), progress=bool(cfg.progress)).summary

@@ -21,35 +21,27 @@ Defaults: the students' far starts in the wake as posed (``flow=family_wake_pose
 from __future__ import annotations
 
 import argparse
+import functools
 from collections.abc import Iterator
 
 import torch
 from torch import Tensor
 
 from flownav.builders import compose_config
-from flownav.checkpoint import load_policy
 from flownav.envs.core import SCENE_AWAY, observe, paper_scene
-from flownav.errors import ConfigError, reported_as_one_line
+from flownav.errors import reported_as_one_line
 from flownav.evaluation.metrics import wilson_interval
 from flownav.evaluation.protocol import EvalSpec
 from flownav.evaluation.rollout import Episodes, run_episodes
-from flownav.evaluation.scripted import SCRIPTED, scripted_view
-from flownav.paths import resolve
+from flownav.evaluation.scripted import load_evaluated
 
 FAR_STARTS = ("flow=family_wake_posed", "task=posed_wake_any_start")
 
 
+@functools.cache
 def load(name: str):
-    """(policy, view) of a checkpoint file or of ``scripted:<name>`` (flownav/evaluation/scripted.py)."""
-    if name.startswith("scripted:"):
-        kind = name.split(":", 1)[1]
-        if kind not in SCRIPTED:
-            raise ConfigError(
-                f"{name} names no scripted policy; choose scripted:<{'|'.join(SCRIPTED)}> or a checkpoint"
-            )
-        policy = SCRIPTED[kind]()
-        return policy, scripted_view(policy)
-    policy, payload = load_policy(resolve(name))
+    """(policy, view) of a checkpoint file or of ``scripted:<name>``, read once per name."""
+    policy, payload = load_evaluated(name, key="policy")
     return policy, payload["obs"]
 
 
@@ -135,7 +127,7 @@ def main(argv=None) -> None:
     torch.set_num_threads(args.threads)
     with reported_as_one_line():
         for name in (args.student, *args.labellers):
-            load(name)  # every policy readable before the first episode
+            load(name)  # every policy read before the first episode (and only once)
         cfg = compose_config([*FAR_STARTS, *args.set], app="evaluate")
         spec = EvalSpec.from_config(cfg, episodes=args.episodes)
         for r in handover_rows(args.student, args.labellers, args.steps, spec, args.scene):

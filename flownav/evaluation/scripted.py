@@ -53,6 +53,22 @@ def scripted_view(policy) -> str:
     return getattr(policy, "view", "geo")
 
 
+def load_evaluated(name: str, key: str = "checkpoint", expect_obs: str | None = None, device="cpu"):
+    """(policy, payload) of a checkpoint file, or of a scripted reference named ``scripted:<name>``, which reads the
+    geo view unless it names another. ``key``: the setting that named it, for the message of an unknown name."""
+    from flownav.checkpoint import load_policy  # the checkpoint loader imports the networks; keep this module light
+    from flownav.errors import ConfigError
+    from flownav.paths import resolve
+
+    if not name.startswith("scripted:"):
+        return load_policy(resolve(name), expect_obs=expect_obs, device=device)
+    kind = name.split(":", 1)[1]
+    if kind not in SCRIPTED:
+        raise ConfigError(f"{key}={name} names no scripted policy; choose scripted:<{'|'.join(SCRIPTED)}>")
+    policy = SCRIPTED[kind]()
+    return policy, {"obs": scripted_view(policy), "role": "reference"}
+
+
 def random_geo_obs(n: int, generator: torch.Generator | None = None, scale: float = 12.0) -> Tensor:
     """Geo observations with target distances log-uniform in [0.1, scale] (dense near the target)."""
     direction = torch.randn(n, 3, generator=generator)
