@@ -19,16 +19,13 @@ next to the cylinder and the inflow/outflow planes afterwards.
 from __future__ import annotations
 
 import ctypes
-import hashlib
-import os
-import platform
-import subprocess
-import tempfile
 from functools import cache
 from pathlib import Path
 
 import torch
 
+from flownav import cbuild
+from flownav.cbuild import cpu_signature  # noqa: F401  (the CPU a cached kernel is for)
 from flownav.cfd.lattice import Lattice, get_lattice, shear_coefficients
 
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
@@ -155,66 +152,22 @@ void collide(float* restrict g, const float* restrict beta_n, long n) {{
 """
 
 
-def _cache_dir() -> Path:
-    root = os.environ.get("FLOWNAV_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "flownav")
-    path = Path(root) / "cfd_kernels"
-    path.mkdir(parents=True, exist_ok=True)
-    return path
-
-
-@cache
-def cpu_signature() -> str:
-    """The CPU a ``-march=native`` build is for: machine, model name and feature flags (Linux), so a
-    shared cache on a cluster with mixed nodes never hands one node a kernel built for another."""
-    parts = [platform.machine(), platform.processor()]
-    try:
-        info = Path("/proc/cpuinfo").read_text()
-    except OSError:
-        info = ""
-    for field in ("model name", "flags", "Features", "CPU part"):  # x86 and ARM spellings
-        line = next((ln for ln in info.splitlines() if ln.split(":")[0].strip() == field), "")
-        parts.append(line.split(":", 1)[-1].strip())
-    return "|".join(parts)
-
-
-FLAGS = (
-    "-O3",
-    "-march=native",
-    "-fopenmp",
-    "-fno-math-errno",
-    "-fno-trapping-math",
-    "-mprefer-vector-width=512",
-    "-shared",
-    "-fPIC",
-)
+FLAGS = (*cbuild.OPTIMISE, "-mprefer-vector-width=512", *cbuild.SHARED)
+KIND = "cfd_kernels"
 
 
 def library_file(lattice: str, cpu: str | None = None) -> Path:
     """Where the kernel of ``lattice`` built for ``cpu`` (default: this one) is cached."""
-    text = "\n".join((source(get_lattice(lattice)), " ".join(FLAGS), cpu if cpu is not None else cpu_signature()))
-    return _cache_dir() / f"lbm_{lattice}_{hashlib.sha256(text.encode()).hexdigest()[:16]}.so"
+    return cbuild.library_file(KIND, f"lbm_{lattice}", source(get_lattice(lattice)), FLAGS, cpu)
 
 
 @cache
 def load(lattice: str):
     """Compile (once per source, flags and CPU) and load the kernel library for a lattice."""
-    src, flags = source(get_lattice(lattice)), list(FLAGS)
-    so = library_file(lattice)
-    if not so.exists():
-        with tempfile.TemporaryDirectory() as tmp:
-            c_file = Path(tmp) / "lbm.c"
-            c_file.write_text(src)
-            tmp_so = Path(tmp) / "lbm.so"
-            try:
-                subprocess.run(["gcc", *flags, "-o", str(tmp_so), str(c_file)], check=True, capture_output=True)
-            except (OSError, subprocess.CalledProcessError) as e:
-                err = getattr(e, "stderr", b"") or b""
-                raise RuntimeError(
-                    f"building the C lattice-Boltzmann kernel failed ({e}; {err.decode()[-500:]}); "
-                    "install gcc with OpenMP, or run with backend='torch'"
-                ) from e
-            os.replace(tmp_so, so)  # atomic: concurrent builders never load a partial file
-    lib = ctypes.CDLL(str(so))
+    try:
+        lib = cbuild.build(KIND, f"lbm_{lattice}", source(get_lattice(lattice)), FLAGS)
+    except RuntimeError as e:
+        raise RuntimeError(f"{e}; install gcc with OpenMP, or run with backend='torch'") from e
     c_long, c_int, ptr = ctypes.c_long, ctypes.c_int, ctypes.c_void_p
     lib.stream_collide.argtypes = [ptr, ptr, ptr, c_long, c_long, c_long, c_long, c_int]
     lib.collide.argtypes = [ptr, ptr, c_long]

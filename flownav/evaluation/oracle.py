@@ -39,9 +39,10 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from flownav.envs.core import in_obstacle
+from flownav.envs.core import flow_at, in_obstacle
 from flownav.envs.kinematics import heading_vector, move, step_reaches, turn, wrap_angle
 from flownav.envs.navigation import DPSI_MAX, DTHETA_MAX, NavigationEnv
+from flownav.flows.families import FlowFamily
 
 
 @dataclass(frozen=True)
@@ -158,6 +159,9 @@ class Oracle:
         s = self.settings
         m, K = cand.shape[:2]
         rep = idx.repeat_interleave(K)  # env slot of each simulated swimmer
+        # The slots' flows and strengths gathered once for all steps (a family's parameters per row).
+        flow = env.flow.take(rep) if isinstance(env.flow, FlowFamily) else env.flow
+        strength = env.state.strength[rep]
         pos, target = env.pos[rep], env.target[rep]
         theta, psi = env.theta[rep], env.psi[rep]
         flow_vel, t0, steps0 = env.flow_vel[rep], env.t0[rep], env.steps[rep]
@@ -177,11 +181,11 @@ class Oracle:
             new, _ = move(pos, swim, flow_vel, env.dt)
             reached = live & step_reaches(env.flow.displacement(pos, target), new - pos, radius)
             pos = torch.where(live[:, None], env.flow.wrap(new), pos)
-            flow_vel = env._flow_at(pos, t0 + (steps0 + (h + 1 if s.forecast else 0)) * env.dt, rep)
+            flow_vel = flow_at(flow, env.settings, strength, pos, t0 + (steps0 + (h + 1 if s.forecast else 0)) * env.dt)
             if s.sensing_radius is not None:
                 unseen = env.flow.displacement(here, pos).norm(dim=-1) > s.sensing_radius
                 flow_vel = torch.where(unseen[:, None], felt, flow_vel)
-            blocked = in_obstacle(env.flow, pos, rep)
+            blocked = in_obstacle(flow, pos)
             if s.knows_walls:
                 blocked = blocked | ~env.flow.in_domain(pos)
             out = live & ~reached & blocked

@@ -94,6 +94,15 @@ class FlowFamily(FlowField):
         self.members = [m.bind(num_slots, device) for m in self.members]
         self.params = self.draw(self.num_slots, torch.Generator(device=device).manual_seed(0), device)
 
+    def take(self, idx: Tensor) -> FlowFamily:
+        """This family for the rows ``idx``: row i is slot ``idx[i]``. Many look-ups of the same rows (the oracle's
+        candidate plans over a horizon) then gather each slot's parameters once, not at every call."""
+        taken = copy.copy(self)
+        taken.num_slots = int(idx.shape[0])
+        taken.params = {key: value[idx] for key, value in self.params.items()}
+        taken.members = [m.take(idx) for m in self.members]
+        return taken
+
     def resample(self, idx: Tensor, generator: torch.Generator) -> None:
         """New flows for the slots ``idx``: this family's parameters, then each member's."""
         if not self.num_slots:

@@ -35,6 +35,7 @@ from torch import Tensor
 from flownav import schema
 from flownav.atomic import atomic_write
 from flownav.errors import DataError
+from flownav.flows import gridkernel
 from flownav.flows.base import Box, Cylinder, FlowField, obstacle_from_dict
 from flownav.provenance import sha256
 
@@ -98,7 +99,8 @@ class GridFlow(FlowField):
         if max_speed is None:
             max_speed = float(velocity.float().norm(dim=-1).max())
         self.max_speed = float(max_speed)
-        self._store(velocity.to(device=device, dtype=dtype))
+        # A float16 field is kept as float16 (the look-up widens each value it reads, exactly): half the memory.
+        self._store(velocity.to(device=device, dtype=torch.float16 if velocity.dtype == torch.float16 else dtype))
 
     def _store(self, velocity: Tensor) -> None:
         """Lay the field out so that a swimmer's 16 interpolation corners are 4 contiguous rows.
@@ -121,6 +123,14 @@ class GridFlow(FlowField):
         px, py, nzp, T = table.shape[:4]
         self._row_strides = (py * nzp * T, nzp * T, T, 1)  # x, y, z, t
         self._table = table.reshape(-1, 12).contiguous()
+        long = {"dtype": torch.long}
+        self._kernel_args = (  # what flownav/flows/gridkernel.py reads
+            torch.tensor(self.shape, **long),
+            torch.tensor(self.origin, dtype=torch.float32),
+            torch.tensor(self.spacing, dtype=torch.float32),
+            torch.tensor(self.periodic, dtype=torch.int32),
+            torch.tensor(self._row_strides, **long),
+        )
 
     @property
     def device(self) -> torch.device:
@@ -155,6 +165,14 @@ class GridFlow(FlowField):
         return f.clamp(0, self.shape[0] - 1)
 
     def velocity(self, pos: Tensor, t: Tensor) -> Tensor:
+        if not gridkernel.usable(self._table, pos):
+            return self.velocity_torch(pos, t)
+        if self.time_mode == "error":
+            self._frame(t.to(pos.dtype))  # raises past the data
+        return gridkernel.velocity(self, pos, t)
+
+    def velocity_torch(self, pos: Tensor, t: Tensor) -> Tensor:
+        """The look-up in torch (any device and dtype): the reference of the C kernel, which gives the same numbers."""
         f = self._frame(t.to(pos.dtype))
         f0 = f.floor().clamp_(0, self.shape[0] - 1)
         wt = f - f0
