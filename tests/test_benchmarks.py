@@ -101,3 +101,20 @@ def test_the_pipeline_cost_counts_every_network_the_students_teacher_is_made_of(
     assert [r["roles"] for r in spelled["results"]] == [r["roles"] for r in shared["results"]]
     with pytest.raises(ValueError, match="output_checkpoint checkpoints/generalist_teacher.pt is a network of the"):
         pipeline_cost("generalist_student", ["output_checkpoint=checkpoints/generalist_teacher.pt"])
+
+
+def test_oracle_benchmark_compares_the_same_plans():
+    """oracle_throughput.py's two look-ups give the oracle the same plans, at a tiny search."""
+    bench = _load("oracle_throughput")
+    small = ["algo.oracle_settings.candidates=8", "algo.oracle_settings.iterations=1"]
+    small.append("+algo.oracle_settings.horizon=6")
+    row = bench.replan(2, 1, small)
+    assert row["bit_identical"] and row["swimmers"] == 2 and row["settings"]["candidates"] == 8
+    from flownav.flows.grid import load_grid_flow
+
+    flow = load_grid_flow(bench.ROOT / "data" / "cylinder_re300")
+    look = bench.look_up(flow, swimmers=3, candidates=5, rounds=1, threads=1)
+    assert look["bit_identical"] and look["rows"] == 15
+    with bench.torch_look_up():
+        assert flow.velocity.__func__ is type(flow).velocity_torch  # restored after
+    assert flow.velocity.__func__ is not type(flow).velocity_torch

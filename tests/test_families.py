@@ -85,6 +85,10 @@ def test_rows_follow_their_slots():
         full = family.velocity(pos, t)
         idx = torch.tensor([3, 7, 11])
         assert torch.allclose(family.velocity(pos[idx], t[idx], idx), full[idx]), type(family).__name__
+        # The family taken for those rows (the oracle's rollouts) gives exactly what the slots give.
+        taken = family.take(idx)
+        assert torch.equal(taken.velocity(pos[idx], t[idx]), family.velocity(pos[idx], t[idx], idx))
+        assert torch.equal(taken.in_obstacle(pos[idx]), family.in_obstacle(pos[idx], idx))
         with pytest.raises(ValueError, match="one row per env slot"):
             family.velocity(pos[idx], t[idx])
 

@@ -18,6 +18,7 @@ from flownav.flows import (
     RotatedFlow,
     ScaledFlow,
     UniformFlow,
+    gridkernel,
     load_grid_flow,
     rotate_z,
     save_grid_flow,
@@ -256,3 +257,34 @@ def test_look_up_is_exact_in_tables_beyond_float32_integer_range():
     pos = torch.stack((k.float(), torch.zeros(3), torch.zeros(3)), -1)
     got = flow.velocity(pos, torch.ones(3))  # float32 positions, as in the environment
     assert torch.equal(got.float(), field[1, k, 0, 0].float())
+
+
+needs_gcc = pytest.mark.skipif(gridkernel.load() is None, reason="gcc cannot build the C look-up here")
+
+
+@needs_gcc
+@pytest.mark.parametrize("time_mode", ["looped", "clamped"])
+@pytest.mark.parametrize("source", [torch.float32, torch.float16])
+def test_the_c_look_up_gives_the_torch_paths_numbers_bit_for_bit(time_mode, source):
+    """Periodic and bounded axes, positions beyond the grid, times before and after the data, blocks of 64 and a
+    remainder, one thread's batch and a parallel one: equal to the last bit."""
+    gen = torch.Generator().manual_seed(3)
+    field = torch.randn(5, 9, 7, 6, 3, generator=gen).to(source)
+    flow = GridFlow(field, ORIGIN, SPACING, DT, periodic=(False, True, True), time_mode=time_mode)
+    assert flow._table.dtype == source  # a float16 field is stored as it is
+    lo, size = torch.tensor(ORIGIN), torch.tensor(SPACING) * torch.tensor([9.0, 7.0, 6.0])
+    for n in (1, 63, 65, 10_001):
+        pos = lo - size + 3 * size * torch.rand(n, 3, generator=gen)
+        t = (torch.rand(n, generator=gen) - 0.3) * 40 * DT
+        assert gridkernel.usable(flow._table, pos)
+        assert torch.equal(flow.velocity(pos, t), flow.velocity_torch(pos, t)), n
+
+
+@needs_gcc
+def test_the_c_look_up_names_a_non_finite_position():
+    flow = GridFlow(torch.zeros(2, 3, 3, 3, 3), ORIGIN, SPACING, DT, periodic=(False, False, True))
+    pos = torch.tensor([[1.0, -1.0, 0.1], [1.0, -1.0, float("nan")]])
+    with pytest.raises(ValueError, match="at 1 non-finite positions or times"):
+        flow.velocity(pos, torch.zeros(2))
+    inf = torch.tensor([[float("inf"), -1.0, 0.1]])  # a bounded axis clamps, as the torch path does
+    assert torch.equal(flow.velocity(inf, torch.zeros(1)), flow.velocity_torch(inf, torch.zeros(1)))
