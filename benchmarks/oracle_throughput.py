@@ -9,6 +9,9 @@
 2. One replan of the oracle at the far-start labeller's search (``+experiment=generalist_away_expert``: 256
    candidates x 4 rounds, 60 steps ahead) for ``swimmers`` fresh episodes, with either look-up, and whether the
    plans agree bit for bit.
+3. The env step of the wake's flows at a training batch (benchmarks/family_throughput.py's cases: the plain wake with
+   the teacher's view, the students' family with their DAgger views, the far-start labeller's posed wake with the
+   privileged views), windows of each look-up interleaved, 1 thread.
 The oracle imitators' training (flownav/algorithms/oracle_dagger.py) spends most of its time in such replans.
 """
 
@@ -27,6 +30,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from common import machine, write_result  # noqa: E402
+from family_throughput import make_stepper, window_rate  # noqa: E402
 
 from flownav.algorithms.oracle_dagger import oracle_settings  # noqa: E402
 from flownav.builders import build_env, build_flow, build_task, compose_config  # noqa: E402
@@ -100,6 +104,29 @@ def replan(swimmers: int, threads: int, overrides: list[str]) -> dict:
     }
 
 
+ENV_CASES = {  # flow -> the views its trainer's env computes
+    "cylinder": ("geo_sincos",),
+    "family_mix_turned": ("ego_mem_grad", "geo_priv_scene"),
+    "family_wake_posed": ("geo_priv", "geo_priv_critic"),
+}
+
+
+def env_step(batch: int, seconds: float, rounds: int) -> list[dict]:
+    torch.set_num_threads(1)
+    rows = []
+    for flow, views in ENV_CASES.items():
+        step = make_stepper(flow, views, batch)
+        c_rates, torch_rates = [], []
+        for _ in range(rounds):  # interleaved windows: the machine's drift falls on both alike
+            c_rates.append(window_rate(step, batch, seconds))
+            with torch_look_up():
+                torch_rates.append(window_rate(step, batch, seconds))
+        c, t = sorted(c_rates)[rounds // 2], sorted(torch_rates)[rounds // 2]
+        rows.append({"flow": flow, "views": list(views), "batch": batch, "c_steps_per_s": c, "torch_steps_per_s": t})
+        rows[-1]["speedup"] = c / t
+    return rows
+
+
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--swimmers", type=int, default=512)
@@ -107,20 +134,25 @@ def main(argv=None) -> dict:
     p.add_argument("--rounds", type=int, default=10)
     p.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     p.add_argument("--override", nargs="*", default=[], help="config overrides of the replan (e.g. small tests)")
+    p.add_argument("--batch", type=int, default=4096, help="env slots of the env-step cases")
+    p.add_argument("--seconds", type=float, default=2.0, help="length of one env-step window")
     p.add_argument("--out", default="oracle_throughput", help="the result's name in benchmarks/results")
     a = p.parse_args(argv)
     flow = load_grid_flow(ROOT / "data" / "cylinder_re300")
     looks = [look_up(flow, a.swimmers, a.candidates, a.rounds, n) for n in a.threads]
     plans = [replan(a.swimmers, n, a.override) for n in a.threads]
+    steps = env_step(a.batch, a.seconds, max(a.rounds // 2, 1))
     result = {
         "what": __doc__.splitlines()[0],
         "command": "python benchmarks/oracle_throughput.py " + " ".join(sys.argv[1:] if argv is None else argv),
         "look_up": looks,
         "replan": plans,
+        "env_step": steps,
         "machine": machine(),
         "headline": {
             "look_up_speedup": {str(r["threads"]): round(r["speedup"], 2) for r in looks},
             "replan_speedup": {str(r["threads"]): round(r["speedup"], 2) for r in plans},
+            "env_step_speedup": {r["flow"]: round(r["speedup"], 2) for r in steps},
             "bit_identical": all(r["bit_identical"] for r in looks + plans),
         },
     }

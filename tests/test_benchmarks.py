@@ -115,6 +115,8 @@ def test_oracle_benchmark_compares_the_same_plans():
     flow = load_grid_flow(bench.ROOT / "data" / "cylinder_re300")
     look = bench.look_up(flow, swimmers=3, candidates=5, rounds=1, threads=1)
     assert look["bit_identical"] and look["rows"] == 15
+    steps = bench.env_step(batch=8, seconds=0.01, rounds=1)
+    assert [(r["flow"], r["batch"]) for r in steps] == [(flow, 8) for flow in bench.ENV_CASES]
     with bench.torch_look_up():
         assert flow.velocity.__func__ is type(flow).velocity_torch  # restored after
     assert flow.velocity.__func__ is not type(flow).velocity_torch
