@@ -1,4 +1,4 @@
-"""The grid-flow look-up in C: the same numbers as :meth:`GridFlow.velocity_torch`, 4-5 times faster on a CPU.
+"""The grid-flow look-up in C: the same numbers as :meth:`GridFlow.velocity_torch`, several times faster on a CPU.
 
 Why: the look-up is bound by memory latency (the shipped wake's table is 190 MB; every swimmer gathers 4 rows of
 it), and it dominates the oracle's rollouts (about three quarters of their time). The torch path gathers, then makes
