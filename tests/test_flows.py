@@ -286,5 +286,7 @@ def test_the_c_look_up_names_a_non_finite_position():
     pos = torch.tensor([[1.0, -1.0, 0.1], [1.0, -1.0, float("nan")]])
     with pytest.raises(ValueError, match="at 1 non-finite positions or times"):
         flow.velocity(pos, torch.zeros(2))
+    with pytest.raises(ValueError, match="one time per position: got 1 for 2 positions"):
+        flow.velocity(pos, torch.zeros(1))
     inf = torch.tensor([[float("inf"), -1.0, 0.1]])  # a bounded axis clamps, as the torch path does
     assert torch.equal(flow.velocity(inf, torch.zeros(1)), flow.velocity_torch(inf, torch.zeros(1)))

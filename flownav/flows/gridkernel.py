@@ -92,7 +92,7 @@ static inline float lerp(float a, float b, float w) { return a + w * (b - a); }
 
 static inline float remainder_(float a, float n) {  // torch.remainder for n > 0
     float m = fmodf(a, n);
-    return (m != 0.0f && m < 0.0f) ? m + n : m;
+    return m < 0.0f ? m + n : m;
 }
 
 static inline float frame(float f, long T, int looped) {  // GridFlow._frame
@@ -147,7 +147,9 @@ def usable(table: Tensor, pos: Tensor) -> bool:
 def velocity(flow, pos: Tensor, t: Tensor) -> Tensor:
     """``flow.velocity_torch(pos, t)`` for a :class:`GridFlow` ``flow`` (``usable`` for its table and ``pos``)."""
     pos = pos.contiguous()
-    t = t.to(pos.dtype).expand(pos.shape[0]).contiguous()
+    t = t.to(pos.dtype).reshape(-1).contiguous()
+    if t.shape[0] != pos.shape[0]:  # the kernel reads one time per row
+        raise ValueError(f"the grid flow needs one time per position: got {t.shape[0]} for {pos.shape[0]} positions")
     out = torch.empty_like(pos)
     bad = torch.zeros(1, dtype=torch.long)
     args = flow._kernel_args
