@@ -1,7 +1,7 @@
 """The grid-flow look-up in C: the same numbers as :meth:`GridFlow.velocity_torch`, several times faster on a CPU.
 
 Why: the look-up is bound by memory latency (the shipped wake's table is 190 MB; every swimmer gathers 4 rows of
-it), and it dominates the oracle's rollouts (about three quarters of their time). The torch path gathers, then makes
+it), and in torch it takes about three quarters of the oracle's rollouts in the wake. The torch path gathers, then makes
 a dozen passes over ``[N, 16, 3]`` intermediates; this kernel computes each block of 64 swimmers' rows first,
 prefetches them, then interpolates from cache in one pass. It performs the torch path's float operations in the
 same order (no fused multiply-add: ``-ffp-contract=off``), so the two agree bit for bit; tests/test_flows.py checks
