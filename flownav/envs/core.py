@@ -258,6 +258,12 @@ def flow_at(flow: FlowField, settings: Settings, strength: Tensor, pos: Tensor, 
     return u * s[:, None]
 
 
+def flow_of_rows(flow: FlowField, idx: Tensor) -> FlowField:
+    """The flow of a batch whose row i belongs to slot ``idx[i]``, for many look-ups of the same rows (flow_at and
+    in_obstacle with idx=None): a family taken for them (each slot's parameters gathered once), any other as it is."""
+    return flow.take(idx) if isinstance(flow, FlowFamily) else flow
+
+
 def in_obstacle(flow: FlowField, pos: Tensor, idx: Tensor | None = None) -> Tensor:
     """Rows of ``pos`` inside an obstacle; a family needs the env slot of each row (``idx``)."""
     return flow.in_obstacle(pos, idx) if isinstance(flow, FlowFamily) else flow.in_obstacle(pos)

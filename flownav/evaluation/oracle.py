@@ -39,10 +39,9 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from flownav.envs.core import flow_at, in_obstacle
+from flownav.envs.core import flow_at, flow_of_rows, in_obstacle
 from flownav.envs.kinematics import heading_vector, move, step_reaches, turn, wrap_angle
 from flownav.envs.navigation import DPSI_MAX, DTHETA_MAX, NavigationEnv
-from flownav.flows.families import FlowFamily
 
 
 @dataclass(frozen=True)
@@ -159,8 +158,8 @@ class Oracle:
         s = self.settings
         m, K = cand.shape[:2]
         rep = idx.repeat_interleave(K)  # env slot of each simulated swimmer
-        # The slots' flows and strengths gathered once for all steps (a family's parameters per row).
-        flow = env.flow.take(rep) if isinstance(env.flow, FlowFamily) else env.flow
+        # The slots' flows and strengths gathered once for all steps.
+        flow = flow_of_rows(env.flow, rep)
         strength = env.state.strength[rep]
         pos, target = env.pos[rep], env.target[rep]
         theta, psi = env.theta[rep], env.psi[rep]

@@ -134,9 +134,8 @@ def load() -> ctypes.CDLL | None:
         warnings.warn(f"{e}; the grid flows use the torch look-up (the same numbers, slower)", stacklevel=2)
         return None
     p, c_long, c_int = ctypes.c_void_p, ctypes.c_long, ctypes.c_int
-    for elem in ELEMENTS.values():
-        getattr(lib, f"grid_velocity_{elem}").argtypes = [p, p, p, p, c_long, p, p, p, p, p, ctypes.c_float, c_int]
-        getattr(lib, f"grid_velocity_{elem}").argtypes += [c_int, p]
+    for elem in ELEMENTS.values():  # table, pos, t, out, n, the 5 kernel args, dt, looped, threads, bad
+        getattr(lib, f"grid_velocity_{elem}").argtypes = [p, p, p, p, c_long, *[p] * 5, ctypes.c_float, c_int, c_int, p]
     return lib
 
 
